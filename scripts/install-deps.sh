@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Installs the Debian packages valvediag builds against. Only what is missing.
+set -euo pipefail
+pkgs=(cmake g++ make libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
+      libtomlplusplus-dev)
+[ "${VALVEDIAG_FUZZ_DEPS:-0}" = 1 ] && pkgs+=(clang libclang-rt-dev)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "installing: ${missing[*]}"
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi

@@ -1,0 +1,99 @@
+#include "valvediag/preisach.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace valvediag {
+
+int PreisachGrid::level(double u) const {
+  // Nearest threshold u_{v+1}: v = round((u - umin) / delta), ties rounded down as in eq 23.
+  const double r = (u - umin) / delta();
+  if (!(r > 0.5)) return 0;  // also catches NaN
+  if (r > L - 0.5) return L;
+  return static_cast<int>(std::ceil(r - 0.5));
+}
+
+PreisachState::PreisachState(const PreisachGrid& grid)
+    : grid_(grid), gamma_(static_cast<std::size_t>(grid.relay_count()), std::int8_t{-1}) {
+  if (grid.L < 1 || !(grid.umax > grid.umin)) {
+    throw std::invalid_argument("Preisach grid needs L >= 1 and umax > umin");
+  }
+}
+
+void PreisachState::move_to(int v) {
+  const int L = grid_.L;
+  v = std::clamp(v, 0, L);
+  if (v > level_) {
+    // Up thresholds j in (level_, v] are crossed: relays (i, j), i <= j, switch to +1.
+    for (int j = level_ + 1; j <= v; ++j)
+      for (int i = 1; i <= j; ++i) gamma_[static_cast<std::size_t>(grid_.relay_index(i, j))] = 1;
+  } else if (v < level_) {
+    // Down thresholds i in (v, level_] are crossed: relays (i, j), j >= i, switch to -1.
+    for (int i = v + 1; i <= level_; ++i)
+      for (int j = i; j <= L; ++j) gamma_[static_cast<std::size_t>(grid_.relay_index(i, j))] = -1;
+  }
+  level_ = v;
+}
+
+void PreisachState::apply_history(const std::vector<int>& levels) {
+  for (int v : levels) move_to(v);
+}
+
+double PreisachState::output(const std::vector<double>& mu) const {
+  double x = 0.0;
+  for (std::size_t k = 0; k < gamma_.size(); ++k) x += gamma_[k] * mu[k];
+  return x;
+}
+
+PreisachModel::PreisachModel(PreisachGrid grid, std::vector<double> mu, double offset)
+    : grid_(grid), mu_(std::move(mu)), offset_(offset), state_(grid) {
+  if (static_cast<int>(mu_.size()) != grid_.relay_count()) {
+    throw std::invalid_argument("Preisach weights: expected L(L+1)/2 weights");
+  }
+  reset();
+}
+
+void PreisachModel::reset(const std::vector<int>& history) {
+  state_ = PreisachState(grid_);
+  state_.apply_history(history);
+}
+
+double PreisachModel::step(double u) {
+  state_.move_to(grid_.level(u));
+  return state_.output(mu_) + offset_;
+}
+
+std::vector<double> PreisachModel::simulate(const std::vector<double>& u,
+                                            const std::vector<int>& history) {
+  reset(history);
+  std::vector<double> x(u.size());
+  for (std::size_t t = 0; t < u.size(); ++t) x[t] = step(u[t]);
+  return x;
+}
+
+PreisachWeights he_stiction_weights(const PreisachGrid& grid, double fs, double fd) {
+  if (!(fs > fd) || fd < 0) throw std::invalid_argument("He stiction weights need fs > fd >= 0");
+  PreisachWeights w;
+  w.mu.assign(static_cast<std::size_t>(grid.relay_count()), 0.0);
+  const double span = grid.umax - grid.umin;
+  const int jmax = static_cast<int>(std::floor((span - fs - fd) / (fs - fd)));
+  const double d = grid.delta();
+  double total = 0.0;
+  for (int j = 1; j <= jmax; ++j) {
+    // Eq 8: alpha_j = umin + fd + j (fs - fd), beta_j = alpha_j - (fs + fd). The relay's up
+    // threshold (u_j + u_{j+1})/2 = umin + (j - 1/2) delta is matched to alpha, likewise beta.
+    const double alpha = grid.umin + fd + j * (fs - fd);
+    const double beta = alpha - (fs + fd);
+    const int jj = static_cast<int>(std::lround((alpha - grid.umin) / d + 0.5));
+    const int ii = std::max(1, static_cast<int>(std::lround((beta - grid.umin) / d + 0.5)));
+    if (jj < 1 || jj > grid.L || ii > jj) continue;
+    w.mu[static_cast<std::size_t>(grid.relay_index(ii, jj))] += (fs - fd) / 2;
+    total += (fs - fd) / 2;
+  }
+  // All relays at -1 (input at umin) give x = umin.
+  w.offset = grid.umin + total;
+  return w;
+}
+
+}  // namespace valvediag
