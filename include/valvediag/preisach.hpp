@@ -33,8 +33,9 @@ class PreisachState {
   explicit PreisachState(const PreisachGrid& grid);  // all relays -1, level 0 (u at umin)
   const PreisachGrid& grid() const { return grid_; }
   int level() const { return level_; }
-  // Moves the virtual input to level v (0..L), flipping the relays it crosses.
-  void move_to(int v);
+  // Moves the virtual input to level v (0..L), flipping the relays it crosses. With weights,
+  // returns the change of gamma' mu (so an output can be kept up to date in O(flips)).
+  double move_to(int v, const std::vector<double>* mu = nullptr);
   // Drives the state through a sequence of levels (e.g. an assumed history before the data).
   void apply_history(const std::vector<int>& levels);
   std::int8_t relay(int k) const { return gamma_[static_cast<std::size_t>(k)]; }
@@ -66,6 +67,7 @@ class PreisachModel {
   std::vector<double> mu_;
   double offset_;
   PreisachState state_;
+  double x_ = 0.0;  // gamma' mu of the current state
 };
 
 // Weights that reproduce He's stiction model (fs, fd) on a grid (paper eqs 7-8, Proposition 1),

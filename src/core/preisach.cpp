@@ -21,19 +21,28 @@ PreisachState::PreisachState(const PreisachGrid& grid)
   }
 }
 
-void PreisachState::move_to(int v) {
+double PreisachState::move_to(int v, const std::vector<double>* mu) {
   const int L = grid_.L;
   v = std::clamp(v, 0, L);
+  double change = 0.0;
+  auto set = [&](int i, int j, std::int8_t value) {
+    const auto k = static_cast<std::size_t>(grid_.relay_index(i, j));
+    if (gamma_[k] != value) {
+      if (mu) change += 2.0 * value * (*mu)[k];
+      gamma_[k] = value;
+    }
+  };
   if (v > level_) {
     // Up thresholds j in (level_, v] are crossed: relays (i, j), i <= j, switch to +1.
     for (int j = level_ + 1; j <= v; ++j)
-      for (int i = 1; i <= j; ++i) gamma_[static_cast<std::size_t>(grid_.relay_index(i, j))] = 1;
+      for (int i = 1; i <= j; ++i) set(i, j, 1);
   } else if (v < level_) {
     // Down thresholds i in (v, level_] are crossed: relays (i, j), j >= i, switch to -1.
     for (int i = v + 1; i <= level_; ++i)
-      for (int j = i; j <= L; ++j) gamma_[static_cast<std::size_t>(grid_.relay_index(i, j))] = -1;
+      for (int j = i; j <= L; ++j) set(i, j, -1);
   }
   level_ = v;
+  return change;
 }
 
 void PreisachState::apply_history(const std::vector<int>& levels) {
@@ -57,11 +66,12 @@ PreisachModel::PreisachModel(PreisachGrid grid, std::vector<double> mu, double o
 void PreisachModel::reset(const std::vector<int>& history) {
   state_ = PreisachState(grid_);
   state_.apply_history(history);
+  x_ = state_.output(mu_);
 }
 
 double PreisachModel::step(double u) {
-  state_.move_to(grid_.level(u));
-  return state_.output(mu_) + offset_;
+  x_ += state_.move_to(grid_.level(u), &mu_);
+  return x_ + offset_;
 }
 
 std::vector<double> PreisachModel::simulate(const std::vector<double>& u,
