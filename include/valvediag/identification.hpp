@@ -39,8 +39,13 @@ struct FitOptions {
   int max_iterations = 200;    // inner iterations (b search or alternation)
   std::vector<double> kappas{1.0, 0.99, 0.98, 0.97, 0.96, 0.95};
   double validation_fraction = 0.0;  // last fraction of samples held out (0: none)
+  std::size_t validation_start = 0;  // or: first held-out sample index (0: use the fraction)
   bool select_on_validation = false;
   double umin = 0.0, umax = 0.0;  // Preisach input range; both 0: the OP range of the data
+  // Parsimony: among configurations within this many fitness points of the best, the one with the
+  // fewest linear parameters (na + nb), then the coarsest L, then the smallest nk wins. Fitness
+  // alone always prefers a bigger equivalent model by a hair (pole-zero near-cancellations).
+  double parsimony_percent = 0.1;
   int threads = 0;                // 0: all cores
   bool keep_all_configurations = true;
 };

@@ -401,7 +401,9 @@ Split split_of(std::size_t N, const FitOptions& opt) {
   s.t0 = static_cast<std::size_t>(std::max({opt.na_max, opt.nk_max + opt.nb_max, 1}));
   if (opt.block == LinearBlock::Identity) s.t0 = 1;
   s.end = N;
-  if (opt.validation_fraction > 0) {
+  if (opt.validation_start > 0) {
+    s.end = std::min(opt.validation_start, N);
+  } else if (opt.validation_fraction > 0) {
     s.end = static_cast<std::size_t>(std::llround(static_cast<double>(N) * (1.0 - opt.validation_fraction)));
   }
   return s;
@@ -537,7 +539,7 @@ std::string validate(const FitOptions& o) {
     if (!(k > 0 && k <= 1)) return "kappa values must lie in (0, 1]";
   if (!(o.validation_fraction >= 0 && o.validation_fraction < 0.9))
     return "validation fraction must lie in [0, 0.9)";
-  if (o.select_on_validation && o.validation_fraction <= 0)
+  if (o.select_on_validation && o.validation_fraction <= 0 && o.validation_start == 0)
     return "selecting on validation needs a validation split";
   if (o.max_iterations < 1) return "max iterations must be at least 1";
   if ((o.umin != 0 || o.umax != 0) && !(o.umax > o.umin)) return "umax must exceed umin";
@@ -569,7 +571,11 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
   const auto t_start = std::chrono::steady_clock::now();
   if (auto msg = validate(opt); !msg.empty()) throw std::invalid_argument(msg);
   if (u.size() != y.size()) throw std::invalid_argument("input and output differ in length");
-  if (u.size() < minimum_samples(opt)) {
+  if (opt.validation_start > 0 && opt.validation_start + 10 > u.size()) {
+    throw std::invalid_argument("the validation part starts too close to the end of the data");
+  }
+  if (u.size() < minimum_samples(opt) ||
+      (opt.validation_start > 0 && opt.validation_start < minimum_samples(opt))) {
     throw std::invalid_argument("too few samples: " + std::to_string(u.size()) + ", the model needs at least " +
                                 std::to_string(minimum_samples(opt)));
   }
@@ -658,6 +664,23 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
 
   res.first_sample = sp.t0;
   res.estimation_end = sp.end;
+  if (std::isfinite(best_score) && opt.parsimony_percent > 0 && !res.configurations.empty()) {
+    const ConfigurationResult* pick = nullptr;
+    for (const auto& c : res.configurations) {
+      if (!(score(c, opt) >= best_score - opt.parsimony_percent)) continue;
+      auto key = [](const ConfigurationResult& r) {
+        return std::make_tuple(r.structure.na + r.structure.nb, r.structure.L, r.structure.nk, r.structure.na);
+      };
+      if (!pick || key(c) < key(*pick)) pick = &c;
+    }
+    if (pick && !(pick->structure == best.info.structure)) {
+      const Structure s = pick->structure;
+      const RelayDesign design(grid_for(u, opt, s.L), u, y, {0}, dopt);
+      std::vector<int> warm;
+      best = fit_on_design(design, sums, u, y, sp, s, opt, warm, nullptr);
+      best_score = score(best.info, opt);
+    }
+  }
   if (!std::isfinite(best_score)) {
     res.status = IdentificationStatus::NoStableModel;
     res.fitness_percent = kNaN;
@@ -670,13 +693,32 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
   if (opt.initial_memory == InitialMemory::Estimate) {
     const double before = best.info.fitness_percent;
     const PreisachGrid g = best.model.grid;
-    for (const auto& hist : initial_histories(g, u[0])) {
-      const RelayDesign design(g, u, y, hist, dopt);
-      std::vector<int> warm;
-      Eigen::VectorXd b0 = Eigen::Map<const Eigen::VectorXd>(best.model.b.data(), static_cast<Eigen::Index>(best.model.b.size()));
-      Structure s = best.info.structure;
-      if (identity) s = Structure{0, 1, 0, s.L};
-      Candidate c = fit_on_design(design, sums, u, y, sp, s, opt, warm, identity ? nullptr : &b0);
+    const auto histories = initial_histories(g, u[0]);
+    std::vector<Candidate> found(histories.size());
+    std::atomic<std::size_t> next_h{0};
+    const Eigen::VectorXd b0 =
+        Eigen::Map<const Eigen::VectorXd>(best.model.b.data(), static_cast<Eigen::Index>(best.model.b.size()));
+    Structure s0 = best.info.structure;
+    if (identity) s0 = Structure{0, 1, 0, s0.L};
+    // Candidates are independent: share them out over the cores like the grid.
+    auto try_histories = [&] {
+      try {
+        for (std::size_t k; (k = next_h.fetch_add(1)) < histories.size();) {
+          const RelayDesign design(g, u, y, histories[k], dopt);
+          std::vector<int> warm;
+          found[k] = fit_on_design(design, sums, u, y, sp, s0, opt, warm, identity ? nullptr : &b0);
+        }
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mtx);
+        if (!error) error = std::current_exception();
+      }
+    };
+    std::vector<std::thread> hpool;
+    for (unsigned i = 1; i < std::max(1u, nthreads); ++i) hpool.emplace_back(try_histories);
+    try_histories();
+    for (auto& t : hpool) t.join();
+    if (error) std::rethrow_exception(error);
+    for (auto& c : found) {
       res.total_iterations += c.info.iterations;
       if (score(c.info, opt) > best_score + 1e-9) {
         best_score = score(c.info, opt);

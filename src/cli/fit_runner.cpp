@@ -1,0 +1,46 @@
+#include "fit_runner.hpp"
+
+#include <fstream>
+#include <stdexcept>
+
+#include "valvediag/csv_writer.hpp"
+#include "valvediag/data_checks.hpp"
+#include "valvediag/fit_report.hpp"
+
+namespace valvediag::cli {
+
+FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output) {
+  const std::string model = "this model (na <= " + std::to_string(fo.na_max) + ", nb <= " + std::to_string(fo.nb_max) +
+                            ", nk <= " + std::to_string(fo.nk_max) + ", L <= " + std::to_string(fo.L_max) + ")";
+  LoopData checked = d;
+  if (output == "mv") checked.pv = d.mv;  // the identity block fits the valve position
+  check_identifiable_data(checked, minimum_samples(fo), model);
+  FitRun run;
+  run.result = identify(d.op, checked.pv, fo);
+  FitContext ctx;
+  ctx.data_name = d.source;
+  ctx.samples = d.size();
+  ctx.sample_period = d.sample_period();
+  ctx.output_name = output;
+  ctx.method = method_name(fo.method);
+  run.summary = format_summary(run.result, ctx);
+  run.json = to_json(run.result, ctx);
+  return run;
+}
+
+void write_series(const std::string& path, const LoopData& d, const FitRun& run) {
+  const auto& y = run.result.model.block == LinearBlock::Identity ? d.mv : d.pv;
+  const FitSeries s = fit_series(run.result, d.op, y);
+  const std::string yname = run.result.model.block == LinearBlock::Identity ? "mv" : "pv";
+  write_columns_csv(path, {"t", "op", yname, "x_hat", yname + "_sim", "residual"},
+                    {d.t, d.op, y, s.x_hat, s.y_sim, s.residual});
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream f(path, std::ios::binary);
+  if (!f) throw std::runtime_error("cannot write " + path + ": check the directory exists and is writable");
+  f << text;
+  if (!f) throw std::runtime_error("writing " + path + " failed (disk full?)");
+}
+
+}  // namespace valvediag::cli

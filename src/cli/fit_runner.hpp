@@ -1,0 +1,23 @@
+// Runs an identification on loop data and formats it; shared by `fit` and `demo`.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "valvediag/identification.hpp"
+#include "valvediag/loop_data.hpp"
+
+namespace valvediag::cli {
+
+struct FitRun {
+  IdentificationResult result;
+  std::string summary;
+  nlohmann::json json;
+};
+
+// output: "pv" (process) or "mv" (valve position). Checks the data before fitting.
+FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output);
+void write_series(const std::string& path, const LoopData& d, const FitRun& run);
+void write_text(const std::string& path, const std::string& text);
+
+}  // namespace valvediag::cli
