@@ -22,13 +22,14 @@ int main(int argc, char** argv) {
   std::string topic;
   help->add_option("command", topic, "command to explain");
   help->callback([&] {
+    // App::help() would describe the parsed subcommand ('help' itself): ask the formatter.
     if (topic.empty()) {
-      std::cout << app.help();
+      std::cout << app.get_formatter()->make_help(&app, "valvediag", CLI::AppFormatMode::Normal);
       return;
     }
     for (auto* sub : app.get_subcommands({}))
       if (sub->get_name() == topic) {
-        std::cout << sub->help();
+        std::cout << sub->get_formatter()->make_help(sub, "valvediag " + topic, CLI::AppFormatMode::Sub);
         return;
       }
     throw UsageError("unknown command '" + topic + "'; 'valvediag help' lists them");

@@ -1,0 +1,162 @@
+// The binary as a user runs it: exit statuses, messages, files written.
+#include <doctest/doctest.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+namespace {
+
+struct Run {
+  int status = -1;
+  std::string out;  // stdout and stderr together
+};
+
+Run run(const std::string& args) {
+  Run r;
+  const std::string cmd = std::string(VALVEDIAG_BIN) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  REQUIRE(p != nullptr);
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, p)) r.out += buf;
+  const int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+std::string tmp(const std::string& name) { return std::string(VALVEDIAG_TMP) + "/" + name; }
+
+void write(const std::string& path, const std::string& text) {
+  std::ofstream f(path);
+  f << text;
+}
+
+// A small loop file: OP a slow triangle with stiction-like PV, enough for a small grid.
+std::string loop_csv(std::size_t n, bool constant_op = false) {
+  std::ostringstream s;
+  s << "t,op,pv\n";
+  double x = 50, y = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double u = constant_op ? 50.0 : 50 + 10 * std::sin(0.02 * static_cast<double>(k)) + 3 * std::sin(0.13 * static_cast<double>(k));
+    if (std::abs(u - x) > 2.0) x = u;  // a valve that sticks 2 %
+    y = 0.9 * y + 0.1 * (x - 50);
+    s << k * 0.5 << "," << u << "," << y << "\n";
+  }
+  return s.str();
+}
+
+const std::string kSmallGrid = " --na-max 1 --nb-max 1 --nk-max 2 --L-max 8 ";
+
+}  // namespace
+
+TEST_CASE("help lists the commands and each command explains itself") {
+  auto r = run("help");
+  CHECK(r.status == 0);
+  for (const char* c : {"fit", "simulate", "demo"}) CHECK(r.out.find(c) != std::string::npos);
+  auto f = run("fit --help");
+  CHECK(f.status == 0);
+  CHECK(f.out.find("Example") != std::string::npos);
+  CHECK(run("help nonsense").status == 2);
+  CHECK(run("").status == 2);
+  CHECK(run("fit x.csv --no-such-option").status == 2);
+}
+
+TEST_CASE("bad input data: clear message and exit status 2") {
+  SUBCASE("missing file") {
+    auto r = run("fit " + tmp("does-not-exist.csv"));
+    CHECK(r.status == 2);
+    CHECK(r.out.find("does-not-exist.csv") != std::string::npos);
+  }
+  SUBCASE("missing column") {
+    write(tmp("nopv.csv"), "t,op,temp\n0,1,2\n1,2,3\n");
+    auto r = run("fit " + tmp("nopv.csv"));
+    CHECK(r.status == 2);
+    CHECK(r.out.find("pv") != std::string::npos);
+  }
+  SUBCASE("non-numeric cell names the line") {
+    write(tmp("bad.csv"), "t,op,pv\n0,1,2\n1,abc,3\n");
+    auto r = run("fit " + tmp("bad.csv"));
+    CHECK(r.status == 2);
+    CHECK(r.out.find(":3") != std::string::npos);
+    CHECK(r.out.find("op") != std::string::npos);
+  }
+  SUBCASE("constant OP") {
+    write(tmp("const.csv"), loop_csv(800, true));
+    auto r = run("fit " + tmp("const.csv") + kSmallGrid);
+    CHECK(r.status == 2);
+    CHECK(r.out.find("constant") != std::string::npos);
+  }
+  SUBCASE("too few samples for the requested model") {
+    write(tmp("short.csv"), loop_csv(40));
+    auto r = run("fit " + tmp("short.csv"));
+    CHECK(r.status == 2);
+    CHECK(r.out.find("40") != std::string::npos);
+  }
+  SUBCASE("irregular sampling is refused, resampled only on request") {
+    std::string text = loop_csv(800);
+    // Shift one time stamp: 10.0 -> 10.2.
+    const auto pos = text.find("\n10,");
+    REQUIRE(pos != std::string::npos);
+    text.replace(pos, 4, "\n10.2,");
+    write(tmp("irregular.csv"), text);
+    auto r = run("fit " + tmp("irregular.csv") + kSmallGrid);
+    CHECK(r.status == 2);
+    auto ok = run("fit " + tmp("irregular.csv") + kSmallGrid + " --resample");
+    CHECK(ok.status == 0);
+  }
+  SUBCASE("bad option values") {
+    write(tmp("ok.csv"), loop_csv(800));
+    CHECK(run("fit " + tmp("ok.csv") + " --validate 1.5").status == 2);
+    CHECK(run("fit " + tmp("ok.csv") + " --select-on validation").status == 2);
+    CHECK(run("fit " + tmp("ok.csv") + " --method magic").status == 2);
+    CHECK(run("fit " + tmp("ok.csv") + " --output mv").status == 2);  // no mv column
+  }
+}
+
+TEST_CASE("fit writes the JSON keys and the series others rely on") {
+  write(tmp("loop.csv"), loop_csv(1200));
+  auto r = run("fit " + tmp("loop.csv") + kSmallGrid + " --validate 0.3 --json " + tmp("fit.json") +
+               " --series-out " + tmp("series.csv"));
+  REQUIRE(r.status == 0);
+  CHECK(r.out.find("fitness:") != std::string::npos);
+  std::ifstream f(tmp("fit.json"));
+  const auto j = nlohmann::json::parse(f);
+  for (const char* k : {"model", "structure", "fitness_percent", "validation_fitness_percent", "a", "b", "c", "mu",
+                        "identifiability", "iterations", "elapsed_s"})
+    CHECK_MESSAGE(j.contains(k), k);
+  for (const char* k : {"na", "nb", "nk", "L"}) CHECK(j["structure"].contains(k));
+  CHECK(j["fitness_percent"].get<double>() > 80.0);
+  REQUIRE(!j["mu"].empty());
+  for (const auto& w : j["mu"]) {
+    CHECK(w["i"].get<int>() <= w["j"].get<int>());
+    CHECK(w["weight"].get<double>() > 0.0);
+    CHECK(w["down_threshold"].get<double>() <= w["up_threshold"].get<double>());
+  }
+  std::ifstream s(tmp("series.csv"));
+  std::string header;
+  std::getline(s, header);
+  CHECK(header == "t,op,pv,x_hat,pv_sim,residual");
+  int lines = 0;
+  for (std::string line; std::getline(s, line);) ++lines;
+  CHECK(lines == 1200);
+}
+
+TEST_CASE("simulate lists and writes scenarios; bad names are user errors") {
+  auto l = run("simulate --list");
+  CHECK(l.status == 0);
+  CHECK(l.out.find("paper-ex1") != std::string::npos);
+  auto w = run("simulate --scenario paper-ex1 --samples 500 --seed 3 --out " + tmp("sim.csv"));
+  CHECK(w.status == 0);
+  std::ifstream f(tmp("sim.csv"));
+  std::string header;
+  std::getline(f, header);
+  CHECK(header.find("op") != std::string::npos);
+  CHECK(header.find("mv") != std::string::npos);
+  auto bad = run("simulate --scenario no-such --out " + tmp("x.csv"));
+  CHECK(bad.status == 2);
+  CHECK(bad.out.find("paper-ex1") != std::string::npos);  // names the known ones
+}
