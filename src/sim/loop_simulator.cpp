@@ -1,0 +1,216 @@
+#include "valvediag/loop_simulator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <variant>
+
+namespace valvediag {
+namespace {
+
+bool finite(double v) {
+  return std::isfinite(v);
+}
+
+// Streams of the simulator's random numbers: one engine each, all from the one seed.
+constexpr std::uint32_t kMeasurementStream = 1;
+constexpr std::uint32_t kFirstDisturbanceStream = 100;
+
+std::mt19937_64 make_engine(std::uint64_t seed, std::uint32_t stream) {
+  // seed_seq's mixing is specified by the standard, so the engines are the same everywhere.
+  std::seed_seq seq{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32),
+                    stream};
+  return std::mt19937_64(seq);
+}
+
+// Tolerance on event times, so that an event at t = k Ts is not missed by rounding in k * Ts.
+double time_slack(double Ts) {
+  return 1e-6 * Ts;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+PiController::PiController(const PiSettings& settings, double Ts) : settings_(settings), Ts_(Ts) {
+  if (!finite(Ts) || Ts <= 0.0) throw std::invalid_argument("controller: needs Ts > 0");
+  if (!finite(settings.kc)) throw std::invalid_argument("controller: kc must be finite");
+  if (!finite(settings.ti) || settings.ti <= 0.0) {
+    throw std::invalid_argument("controller: needs ti > 0");
+  }
+  if (!finite(settings.op_min) || !finite(settings.op_max) || settings.op_min >= settings.op_max) {
+    throw std::invalid_argument("controller: needs op_min < op_max");
+  }
+  if (!finite(settings.op0) || settings.op0 < settings.op_min || settings.op0 > settings.op_max) {
+    throw std::invalid_argument("controller: needs op_min <= op0 <= op_max");
+  }
+  reset(settings.op0);
+}
+
+void PiController::reset(double op0) {
+  u_ = std::clamp(op0, settings_.op_min, settings_.op_max);
+  e_prev_ = 0.0;
+  first_ = true;
+}
+
+double PiController::step(double sp, double pv) {
+  const double e = sp - pv;
+  if (first_) {
+    e_prev_ = e;  // the loop was at rest: no proportional kick from the first error
+    first_ = false;
+  }
+  const double du = settings_.kc * ((e - e_prev_) + Ts_ / settings_.ti * e);
+  u_ = std::clamp(u_ + du, settings_.op_min, settings_.op_max);
+  e_prev_ = e;
+  return u_;
+}
+
+std::string to_string(DisturbanceEntry entry) {
+  return entry == DisturbanceEntry::output ? "output" : "input";
+}
+
+// ---------------------------------------------------------------------------------------------
+void validate(const LoopConfig& c) {
+  if (!finite(c.Ts) || c.Ts <= 0.0) throw std::invalid_argument("loop: needs Ts > 0");
+  PiController check_pi(c.controller, c.Ts);
+  DiscreteProcess check_process(c.process, c.Ts);
+  for (const auto& e : c.valve) {
+    if (const auto* lag = std::get_if<ActuatorLag>(&e)) {
+      if (std::abs(lag->sample_period() - c.Ts) > 1e-12 * c.Ts) {
+        throw std::invalid_argument(
+            "actuator-lag was built for Ts = " + std::to_string(lag->sample_period()) +
+            " s but the loop runs at Ts = " + std::to_string(c.Ts) + " s");
+      }
+    }
+  }
+  if (!finite(c.measurement_noise_std) || c.measurement_noise_std < 0.0) {
+    throw std::invalid_argument("noise: needs measurement_noise_std >= 0");
+  }
+  for (const auto& s : c.disturbances.steps) {
+    if (!finite(s.time) || !finite(s.size)) {
+      throw std::invalid_argument("step disturbance: time and size must be finite");
+    }
+  }
+  for (const auto& d : c.disturbances.drifts) {
+    if (!finite(d.start) || !finite(d.slope) || std::isnan(d.stop) || d.stop < d.start) {
+      throw std::invalid_argument("drift disturbance: needs finite start and slope, stop >= start");
+    }
+  }
+  for (const auto& n : c.disturbances.noises) {
+    if (!finite(n.std) || n.std < 0.0 || !finite(n.tau) || n.tau <= 0.0) {
+      throw std::invalid_argument("filtered-noise disturbance: needs std >= 0 and tau > 0");
+    }
+  }
+  for (std::size_t i = 0; i < c.setpoint.size(); ++i) {
+    if (!finite(c.setpoint[i].time) || !finite(c.setpoint[i].value)) {
+      throw std::invalid_argument("setpoint: times and values must be finite");
+    }
+    if (i > 0 && c.setpoint[i].time < c.setpoint[i - 1].time) {
+      throw std::invalid_argument("setpoint: step times must not decrease");
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+LoopSimulator::LoopSimulator(LoopConfig config, std::uint64_t seed)
+    : config_((validate(config), std::move(config))),
+      pi_(config_.controller, config_.Ts),
+      valve_(config_.valve),
+      process_(config_.process, config_.Ts) {
+  reset(seed);
+}
+
+void LoopSimulator::reset(std::uint64_t seed) {
+  k_ = 0;
+  // At rest: OP at op0, the valve at the position op0 gives, the process in steady state there.
+  pi_.reset(config_.controller.op0);
+  const double x_rest = valve_.reset(config_.controller.op0);
+  process_.reset(x_rest);
+
+  measurement_engine_ = make_engine(seed, kMeasurementStream);
+  normal_.reset();
+  const std::size_t n = config_.disturbances.noises.size();
+  noise_engines_.clear();
+  noise_normals_.assign(n, std::normal_distribution<double>(0.0, 1.0));
+  noise_state_.assign(n, 0.0);
+  for (std::size_t i = 0; i < n; ++i) {
+    noise_engines_.push_back(
+        make_engine(seed, kFirstDisturbanceStream + static_cast<std::uint32_t>(i)));
+    // Start from the stationary distribution, so the run has no start-up transient.
+    noise_state_[i] = config_.disturbances.noises[i].std * noise_normals_[i](noise_engines_[i]);
+  }
+}
+
+double LoopSimulator::setpoint_at(double t) const {
+  double sp = config_.process.pv0;
+  const double slack = time_slack(config_.Ts);
+  for (const auto& s : config_.setpoint) {
+    if (s.time > t + slack) break;
+    sp = s.value;
+  }
+  return sp;
+}
+
+double LoopSimulator::deterministic_disturbance(double t, DisturbanceEntry entry) const {
+  const double slack = time_slack(config_.Ts);
+  double d = 0.0;
+  for (const auto& s : config_.disturbances.steps) {
+    if (s.entry == entry && t + slack >= s.time) d += s.size;
+  }
+  for (const auto& r : config_.disturbances.drifts) {
+    if (r.entry == entry && t > r.start) d += r.slope * (std::min(t, r.stop) - r.start);
+  }
+  return d;
+}
+
+LoopSample LoopSimulator::step() {
+  const double t = static_cast<double>(k_) * config_.Ts;
+  double d_out = deterministic_disturbance(t, DisturbanceEntry::output);
+  double d_in = deterministic_disturbance(t, DisturbanceEntry::input);
+  for (std::size_t i = 0; i < noise_state_.size(); ++i) {
+    (config_.disturbances.noises[i].entry == DisturbanceEntry::output ? d_out : d_in) +=
+        noise_state_[i];
+  }
+
+  const double sp = setpoint_at(t);
+  const double y = process_.output() + d_out;
+  const double ym = y + config_.measurement_noise_std * normal_(measurement_engine_);
+  const double u = pi_.step(sp, ym);
+  const double x = valve_.step(u);
+  process_.advance(x + d_in);
+
+  for (std::size_t i = 0; i < noise_state_.size(); ++i) {
+    const auto& n = config_.disturbances.noises[i];
+    const double a = std::exp(-config_.Ts / n.tau);
+    noise_state_[i] =
+        a * noise_state_[i] + n.std * std::sqrt(1.0 - a * a) * noise_normals_[i](noise_engines_[i]);
+  }
+  ++k_;
+  return {t, sp, u, ym, x};
+}
+
+LoopData LoopSimulator::run(std::size_t samples, const std::string& source) {
+  LoopData d;
+  d.source = source;
+  d.t.reserve(samples);
+  d.sp.reserve(samples);
+  d.op.reserve(samples);
+  d.pv.reserve(samples);
+  d.mv.reserve(samples);
+  for (std::size_t k = 0; k < samples; ++k) {
+    const LoopSample s = step();
+    d.t.push_back(s.t);
+    d.sp.push_back(s.sp);
+    d.op.push_back(s.op);
+    d.pv.push_back(s.pv);
+    d.mv.push_back(s.mv);
+  }
+  return d;
+}
+
+LoopData simulate_loop(const LoopConfig& config, std::uint64_t seed, std::size_t samples) {
+  LoopSimulator sim(config, seed);
+  return sim.run(samples);
+}
+
+}  // namespace valvediag
