@@ -81,6 +81,7 @@ struct Figures {
 // Runs one case in a child process; the child writes its figures into a pipe.
 template <class F>
 Figures in_child(F&& body) {
+  std::fflush(stdout);  // the child must not inherit unflushed output
   int fd[2];
   if (pipe(fd) != 0) std::abort();
   const pid_t pid = fork();

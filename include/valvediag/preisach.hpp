@@ -71,8 +71,8 @@ class PreisachModel {
 };
 
 // Weights that reproduce He's stiction model (fs, fd) on a grid (paper eqs 7-8, Proposition 1),
-// placed on the nearest relays of the discretization. Returns mu and the output offset such that
-// x = gamma' mu + offset starts at umin + fd... see preisach.cpp for the exact construction.
+// placed on the nearest relays of the discretization. x = gamma' mu + offset; with all relays at
+// -1 (history {0}) the valve rests at umin + fd, as a He valve that came down to umin.
 struct PreisachWeights {
   std::vector<double> mu;
   double offset = 0.0;

@@ -86,23 +86,23 @@ PreisachWeights he_stiction_weights(const PreisachGrid& grid, double fs, double 
   if (!(fs > fd) || fd < 0) throw std::invalid_argument("He stiction weights need fs > fd >= 0");
   PreisachWeights w;
   w.mu.assign(static_cast<std::size_t>(grid.relay_count()), 0.0);
-  const double span = grid.umax - grid.umin;
-  const int jmax = static_cast<int>(std::floor((span - fs - fd) / (fs - fd)));
   const double d = grid.delta();
   double total = 0.0;
-  for (int j = 1; j <= jmax; ++j) {
-    // Eq 8: alpha_j = umin + fd + j (fs - fd), beta_j = alpha_j - (fs + fd). The relay's up
-    // threshold (u_j + u_{j+1})/2 = umin + (j - 1/2) delta is matched to alpha, likewise beta.
-    const double alpha = grid.umin + fd + j * (fs - fd);
+  // The valve came down to umin (residual force -fd, x = umin + fd), as in the proof of
+  // Proposition 1. It slips up by fs - fd each time u passes alpha_j = umin + fs + fd +
+  // (j - 1)(fs - fd), and the slip is undone below beta_j = alpha_j - (fs + fd) (eq 8, shifted so
+  // that every slip up to umax is represented and no beta falls below umin).
+  for (int j = 1;; ++j) {
+    const double alpha = grid.umin + fs + fd + (j - 1) * (fs - fd);
+    if (alpha > grid.umax) break;
     const double beta = alpha - (fs + fd);
-    const int jj = static_cast<int>(std::lround((alpha - grid.umin) / d + 0.5));
-    const int ii = std::max(1, static_cast<int>(std::lround((beta - grid.umin) / d + 0.5)));
-    if (jj < 1 || jj > grid.L || ii > jj) continue;
+    // Up threshold (u_j + u_{j+1})/2 = umin + (j - 1/2) delta matched to alpha, likewise beta.
+    const int jj = std::clamp(static_cast<int>(std::lround((alpha - grid.umin) / d + 0.5)), 1, grid.L);
+    const int ii = std::clamp(static_cast<int>(std::lround((beta - grid.umin) / d + 0.5)), 1, jj);
     w.mu[static_cast<std::size_t>(grid.relay_index(ii, jj))] += (fs - fd) / 2;
     total += (fs - fd) / 2;
   }
-  // All relays at -1 (input at umin) give x = umin.
-  w.offset = grid.umin + total;
+  w.offset = grid.umin + fd + total;  // all relays -1: x = umin + fd
   return w;
 }
 

@@ -32,7 +32,8 @@ Mismatch compare(const PreisachGrid& grid, const std::vector<double>& u, double 
   PreisachModel preisach(grid, w.mu, w.offset);
   const std::vector<double> xp = preisach.simulate(u);  // memory: input came up from umin
   HeStiction he(fs, fd);
-  he.reset(u.front());  // at rest at umin, no residual force: x = umin like the weights' offset
+  // Came down to umin: residual force -fd, x = umin + fd, like the weights' offset.
+  he.reset(u.front(), u.front() + fd, -fd);
   Mismatch m;
   for (std::size_t k = 0; k < u.size(); ++k) {
     const double d = std::abs(he.step(u[k]) - xp[k]);
@@ -49,8 +50,8 @@ Mismatch compare(const PreisachGrid& grid, const std::vector<double>& u, double 
 
 TEST_CASE("Proposition 1: He valve block equals PreisachModel with he_stiction_weights") {
   const double fs = 8.4, fd = 3.5243;  // the paper's Example 1 valve
-  // Slow input from umin with nested reversals inside the range (0 .. 85 %).
-  const auto u = path({0, 80, 30, 70, 45, 85, 20, 60, 41, 59, 41, 59}, 0.01);
+  // Slow input from umin with nested reversals over the whole range, touching both ends.
+  const auto u = path({0, 80, 30, 70, 45, 100, 20, 60, 0, 59, 41, 100, 41, 59}, 0.01);
   const Mismatch coarse = compare({0.0, 100.0, 16}, u, fs, fd);  // the paper's L
   const Mismatch medium = compare({0.0, 100.0, 100}, u, fs, fd);
   const Mismatch fine = compare({0.0, 100.0, 400}, u, fs, fd);
