@@ -38,6 +38,9 @@ struct FitOptions {
   double stop_tolerance = -1;  // <0: 1e-9 relative cost decrease, or 0.01 for ParameterChange
   int max_iterations = 200;    // inner iterations (b search or alternation)
   std::vector<double> kappas{1.0, 0.99, 0.98, 0.97, 0.96, 0.95};
+  // BIC's sigma^2 (eq 22) from the simulated output as the paper says (one simulation per kappa,
+  // O(N) each), or from the equation error, which the Gram matrix gives at no cost in N.
+  bool bic_on_simulated_output = false;
   double validation_fraction = 0.0;  // last fraction of samples held out (0: none)
   std::size_t validation_start = 0;  // or: first held-out sample index (0: use the fraction)
   bool select_on_validation = false;

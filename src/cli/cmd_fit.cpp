@@ -101,6 +101,8 @@ void add_fit(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"nonnegative", "paper-sign"}))->group(g_m)->capture_default_str();
   cmd->add_option("--initial-memory", a->memory, "estimate, or rising (OP came up from its minimum)")
       ->check(CLI::IsMember({"estimate", "rising"}))->group(g_m)->capture_default_str();
+  cmd->add_flag("--bic-simulated", a->fit.bic_on_simulated_output,
+                "BIC from the simulated output (paper, O(N) per kappa) instead of the equation error")->group(g_m);
   cmd->add_flag("--no-merge", a->no_merge, "do not merge relays with identical histories")->group(g_m);
   cmd->add_option("--max-iterations", a->fit.max_iterations, "inner iteration cap")->group(g_m)->capture_default_str();
   cmd->add_option("--parsimony", a->fit.parsimony_percent, "prefer the smallest model within this many fitness points")->group(g_m)->capture_default_str();

@@ -205,8 +205,12 @@ class ConfigSolver {
       th.b = unbudgeted.b;
       th.status = path[i].status;
       th.cost = S_.yy(0, 0) + 2.0 * qp.objective(path[i].x);
-      std::vector<double> ys = simulate(th.a, th.b, th.c, th.cw);
-      const double sigma2 = sse(ys) / N;
+      std::vector<double> ys;
+      double sigma2 = std::max(th.cost, 0.0) / N;
+      if (opt_.bic_on_simulated_output) {
+        ys = simulate(th.a, th.b, th.c, th.cw);
+        sigma2 = sse(ys) / N;
+      }
       int nz = 0;
       for (int k = 0; k < Kp(); ++k) nz += th.cw[k] > 0;
       const double P = na_ + nb_ + (identity_ ? 0 : nk_) + nz;
@@ -222,6 +226,7 @@ class ConfigSolver {
       }
     }
     bic_out = best_bic;
+    if (ys_out.empty()) ys_out = simulate(best.a, best.b, best.c, best.cw);
     return best;
   }
 
