@@ -1,0 +1,65 @@
+// Reads one control loop from a delimited text file (CSV, historian exports).
+//
+// Layout: `skip_lines` raw lines, then (after blank and `#` comment lines) the header row, then
+// `skip_after_header` raw lines (units, descriptions), then one sample per row. Blank and `#`
+// lines among the data are ignored. Cells may be quoted ("a,b", "" for a quote). Line ends may be
+// LF, CRLF or CR; a UTF-8 byte-order mark is skipped.
+//
+// Every problem throws DataError naming the file, line and column: unreadable file, missing
+// column, empty / non-numeric / NaN / infinite cell, a row with too few cells or with more cells
+// than the header has names, time not increasing, irregular sampling (without resample), fewer
+// than 2 samples, constant OP. Nothing is printed.
+#pragma once
+
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "valvediag/loop_data.hpp"
+
+namespace valvediag {
+
+struct CsvOptions {
+  // ",", ";", "tab", "space" (runs of blanks), "|", any other single punctuation character, or
+  // "auto": tab, ';' or ',' (whichever the header row has most of), else blanks.
+  std::string delimiter = "auto";
+  std::size_t skip_lines = 0;         // raw lines before the header row
+  std::size_t skip_after_header = 0;  // raw lines between the header row and the first data row
+  // "seconds": the time column is a number of seconds (kept as is). Otherwise a strftime-like
+  // pattern of the time stamps, e.g. "%Y-%m-%d %H:%M:%S" or "%m/%d/%Y %I:%M:%S %p"; %S also takes
+  // a fraction (".250"). Supported: %Y %y %m %d %e %H %I %M %S %f %p %b %B %F %T %%. Stamps are
+  // read as given (no time zone or daylight-saving shift); t becomes seconds since the first row.
+  std::string time_format = "seconds";
+  // Column specs: a header name (exact, else unique case-insensitive match, `*` and `?` allowed
+  // as wildcards), or a 1-based column number when all digits. sp and mv: empty means "use the
+  // column named sp / mv if there is one"; "none" never reads it. t_column "none": there is no
+  // time column and rows are `sample_period` seconds apart, starting at t = 0.
+  std::string t_column = "t";
+  std::string op_column = "op";
+  std::string pv_column = "pv";
+  std::string sp_column;
+  std::string mv_column;
+  // Irregular time steps (more than 1 % off the median step) are refused unless resample is set;
+  // then all signals are linearly interpolated onto a uniform grid from the first time stamp with
+  // period sample_period, or the median step when it is not given.
+  bool resample = false;
+  std::optional<double> sample_period;  // s; without resample it must match the data's period
+  char decimal = '.';                   // '.' or ',' (then '.' in a number is an error)
+};
+
+// Relative deviation of a time step from the median step above which sampling is irregular.
+inline constexpr double kSamplingTolerance = 0.01;
+
+// Reads `path`. LoopData::source is set to `path`. When `notes` is given, it receives short
+// remarks on what was done (columns used, time origin, resampling) for the user to see.
+LoopData read_loop_csv(const std::string& path, const CsvOptions& options,
+                       std::vector<std::string>* notes = nullptr);
+
+// The same on text already in memory; name_for_messages stands in for the file name.
+LoopData parse_loop_csv(std::string_view text, const CsvOptions& options,
+                        const std::string& name_for_messages,
+                        std::vector<std::string>* notes = nullptr);
+
+}  // namespace valvediag

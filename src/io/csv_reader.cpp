@@ -1,0 +1,750 @@
+#include "valvediag/csv_reader.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <filesystem>
+#include <limits>
+#include <system_error>
+
+#include "time_parse.hpp"
+#include "valvediag/data_error.hpp"
+
+namespace valvediag {
+namespace {
+
+constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
+// Resampling makes at most this many samples (and at most 100 per row beyond 10^6).
+constexpr double kMaxGridPoints = 2e7;
+
+bool is_blank(char c) {
+  return c == ' ' || c == '\t';
+}
+
+char lower(char c) {
+  return (c >= 'A' && c <= 'Z') ? static_cast<char>(c - 'A' + 'a') : c;
+}
+
+// A cell or name as it appears in messages: quoted, shortened, control bytes made visible.
+std::string show(std::string_view s) {
+  constexpr std::size_t kMax = 40;
+  std::string out = "'";
+  for (std::size_t i = 0; i < s.size() && i < kMax; ++i) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    out += c < 0x20 || c == 0x7f ? '?' : s[i];
+  }
+  if (s.size() > kMax) out += "...";
+  return out + "'";
+}
+
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+// Physical lines; the line end is LF (optionally after CR), or CR alone in files without LF.
+class Lines {
+ public:
+  explicit Lines(std::string_view text)
+      : text_(text), eol_(text.find('\n') != std::string_view::npos ? '\n' : '\r') {}
+
+  bool next(std::string_view& line) {
+    if (pos_ >= text_.size()) return false;
+    const char* begin = text_.data() + pos_;
+    const std::size_t rest = text_.size() - pos_;
+    const void* hit = std::memchr(begin, eol_, rest);
+    std::size_t len = hit ? static_cast<std::size_t>(static_cast<const char*>(hit) - begin) : rest;
+    pos_ += len + (hit ? 1 : 0);
+    if (eol_ == '\n' && len > 0 && begin[len - 1] == '\r') --len;
+    line = std::string_view(begin, len);
+    ++number_;
+    return true;
+  }
+  std::size_t number() const { return number_; }
+
+ private:
+  std::string_view text_;
+  char eol_;
+  std::size_t pos_ = 0;
+  std::size_t number_ = 0;
+};
+
+bool blank_or_comment(std::string_view line) {
+  for (char c : line) {
+    if (is_blank(c) || c == '\r') continue;
+    return c == '#';
+  }
+  return true;
+}
+
+struct Delimiter {
+  char c = ',';
+  bool blanks = false;  // runs of spaces and tabs
+  bool detect = false;
+};
+
+Delimiter parse_delimiter(const std::string& spec, char decimal, const std::string& file) {
+  Delimiter d;
+  if (spec.empty() || spec == "auto") {
+    d.detect = true;
+  } else if (spec == "tab" || spec == "\\t" || spec == "\t") {
+    d.c = '\t';
+  } else if (spec == "space" || spec == "whitespace" || spec == " ") {
+    d.blanks = true;
+  } else if (spec == "comma") {
+    d.c = ',';
+  } else if (spec == "semicolon") {
+    d.c = ';';
+  } else if (spec.size() == 1 && std::ispunct(static_cast<unsigned char>(spec[0])) &&
+             std::string_view("\"#.-+").find(spec[0]) == std::string_view::npos) {
+    d.c = spec[0];
+  } else {
+    throw DataError(file, 0, "",
+                    "--delimiter " + show(spec) +
+                        " is not usable (use ',', ';', 'tab', 'space', '|' or 'auto')");
+  }
+  if (!d.detect && !d.blanks && d.c == decimal)
+    throw DataError(
+        file, 0, "",
+        std::string("--delimiter and the decimal separator are both '") + decimal + "'");
+  return d;
+}
+
+// Tab if present, else ';' or ',' (whichever is more frequent), else blanks. The header row
+// has no decimal commas, so ';' files with decimal commas are found too.
+Delimiter detect_delimiter(std::string_view header, char decimal) {
+  std::size_t tabs = 0, semis = 0, commas = 0, blanks = 0;
+  bool quoted = false;
+  for (char c : header) {
+    if (c == '"') quoted = !quoted;
+    if (quoted) continue;
+    tabs += c == '\t';
+    semis += c == ';';
+    commas += c == ',';
+    blanks += c == ' ';
+  }
+  if (decimal == ',') commas = 0;
+  Delimiter d;
+  if (tabs > 0) {
+    d.c = '\t';
+  } else if (semis > 0 || commas > 0) {
+    d.c = semis >= commas ? ';' : ',';
+  } else if (blanks > 0) {
+    d.blanks = true;
+  } else {
+    d.c = decimal == ',' ? ';' : ',';  // one column; the column lookup then says what is there
+  }
+  return d;
+}
+
+enum class Split { ok, unterminated_quote, text_after_quote };
+
+class Splitter {
+ public:
+  explicit Splitter(Delimiter d) : d_(d) {}
+
+  // Cells of `line`, at most max_cells of them. Surrounding blanks are trimmed; a cell in
+  // double quotes may hold the delimiter, and "" stands for a quote.
+  Split split(std::string_view line, std::size_t max_cells, std::vector<std::string_view>& cells) {
+    cells.clear();
+    unescaped_.clear();
+    const std::size_t n = line.size();
+    std::size_t pos = 0;
+    if (d_.blanks) {
+      while (pos < n && is_blank(line[pos])) ++pos;
+      if (pos >= n) return Split::ok;
+    }
+    while (cells.size() < max_cells) {
+      std::size_t p = pos;
+      while (p < n && trim(line[p])) ++p;
+      std::size_t next;  // where the following cell starts, n when none follows
+      if (p < n && line[p] == '"') {
+        const std::size_t start = ++p;
+        bool escaped = false;
+        for (;;) {
+          const void* q = std::memchr(line.data() + p, '"', n - p);
+          if (q == nullptr) return Split::unterminated_quote;
+          p = static_cast<std::size_t>(static_cast<const char*>(q) - line.data());
+          if (p + 1 < n && line[p + 1] == '"') {
+            escaped = true;
+            p += 2;
+            continue;
+          }
+          break;
+        }
+        std::string_view content = line.substr(start, p - start);
+        if (escaped) {
+          std::string s;
+          for (std::size_t i = 0; i < content.size(); ++i) {
+            s += content[i];
+            if (content[i] == '"') ++i;
+          }
+          unescaped_.push_back(std::move(s));
+          content = unescaped_.back();
+        }
+        cells.push_back(content);
+        ++p;
+        while (p < n && trim(line[p])) ++p;
+        if (p < n && !delimiter(line[p])) return Split::text_after_quote;
+        next = p;
+      } else {
+        std::size_t end = p;
+        if (d_.blanks) {
+          while (end < n && !is_blank(line[end])) ++end;
+        } else {
+          const void* q = std::memchr(line.data() + p, d_.c, n - p);
+          end = q ? static_cast<std::size_t>(static_cast<const char*>(q) - line.data()) : n;
+        }
+        std::size_t e = end;
+        while (e > p && trim(line[e - 1])) --e;
+        cells.push_back(line.substr(p, e - p));
+        next = end;
+      }
+      if (next >= n) return Split::ok;
+      if (d_.blanks) {
+        while (next < n && is_blank(line[next])) ++next;
+        if (next >= n) return Split::ok;
+        pos = next;
+      } else {
+        pos = next + 1;  // a delimiter at the very end leaves one empty cell
+      }
+    }
+    return Split::ok;
+  }
+
+ private:
+  // A stray CR (from CR CR LF line ends) is trimmed like a blank.
+  bool trim(char c) const { return c == ' ' || c == '\r' || (c == '\t' && d_.c != '\t'); }
+  bool delimiter(char c) const { return d_.blanks ? is_blank(c) : c == d_.c; }
+
+  Delimiter d_;
+  std::deque<std::string> unescaped_;  // deque: views into earlier cells stay valid
+};
+
+enum class Num { ok, empty, bad, not_finite, out_of_range };
+
+Num parse_number(std::string_view s, char decimal, std::string& buf, double& v) {
+  if (s.empty()) return Num::empty;
+  if (s[0] == '+') {
+    s.remove_prefix(1);
+    if (s.empty() || s[0] == '+' || s[0] == '-') return Num::bad;
+  }
+  if (decimal == ',') {
+    // "1.234" must not silently become 1.234 when the file writes 1234 with a decimal comma.
+    if (s.find('.') != std::string_view::npos) return Num::bad;
+    buf.assign(s);
+    std::replace(buf.begin(), buf.end(), ',', '.');
+    s = buf;
+  }
+  const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (ec == std::errc::result_out_of_range) return Num::out_of_range;
+  if (ec != std::errc() || ptr != s.data() + s.size()) return Num::bad;
+  if (!std::isfinite(v)) return Num::not_finite;
+  return Num::ok;
+}
+
+bool looks_numeric(std::string_view s) {
+  std::string buf;
+  double v = 0;
+  const Num r = parse_number(s, '.', buf, v);
+  return r == Num::ok || r == Num::not_finite;
+}
+
+bool all_digits(std::string_view s) {
+  return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+bool iequal(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    if (lower(a[i]) != lower(b[i])) return false;
+  return true;
+}
+
+// Case-insensitive wildcard match: '*' any run, '?' one character. Linear backtracking over the
+// last '*', so long names cannot make it slow.
+bool glob(std::string_view pat, std::string_view s) {
+  std::size_t p = 0, i = 0, star = std::string_view::npos, mark = 0;
+  while (i < s.size()) {
+    if (p < pat.size() && (pat[p] == '?' || lower(pat[p]) == lower(s[i]))) {
+      ++p;
+      ++i;
+    } else if (p < pat.size() && pat[p] == '*') {
+      star = p++;
+      mark = i;
+    } else if (star != std::string_view::npos) {
+      p = star + 1;
+      i = ++mark;
+    } else {
+      return false;
+    }
+  }
+  while (p < pat.size() && pat[p] == '*') ++p;
+  return p == pat.size();
+}
+
+struct Column {
+  Column(const char* role_, const char* flag_, std::string spec_, bool required_)
+      : role(role_), flag(flag_), spec(std::move(spec_)), required(required_) {}
+  const char* role;  // t, op, pv, sp, mv
+  const char* flag;  // the CLI option that chooses it, for hints
+  std::string spec;  // as given
+  bool required;
+  std::size_t index = kNone;
+  std::string name;  // header name, or "column N" when the header cell is empty
+};
+
+std::string list_names(const std::vector<std::string_view>& names) {
+  constexpr std::size_t kMax = 30;
+  std::string s;
+  for (std::size_t i = 0; i < names.size() && i < kMax; ++i) {
+    if (i) s += ", ";
+    s += show(names[i]);
+  }
+  if (names.size() > kMax) s += ", ... (" + std::to_string(names.size()) + " in all)";
+  return s;
+}
+
+void resolve(Column& col, const std::vector<std::string_view>& names, const std::string& file,
+             std::size_t header_line, bool header_numeric) {
+  auto set = [&](std::size_t i) {
+    col.index = i;
+    col.name = names[i].empty() ? "column " + std::to_string(i + 1) : std::string(names[i]);
+  };
+  const std::string& spec = col.spec;
+  if (all_digits(spec)) {
+    const std::size_t number = spec.size() > 9 ? kNone : std::stoul(spec);
+    if (number == 0)
+      throw DataError(file, header_line, spec, "column numbers start at 1", col.role);
+    if (number > names.size())
+      throw DataError(file, header_line, spec,
+                      "there is no column " + spec + ": the header row has " +
+                          std::to_string(names.size()) + " columns (" + list_names(names) + ")",
+                      col.role);
+    set(number - 1);
+    return;
+  }
+  const bool wildcard = spec.find_first_of("*?") != std::string::npos;
+  std::vector<std::size_t> hits;
+  for (int pass = 0; pass < 3 && hits.empty(); ++pass) {
+    if (pass == 2 && !wildcard) break;
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      if (names[i].empty()) continue;
+      const bool match = pass == 0   ? names[i] == spec
+                         : pass == 1 ? iequal(names[i], spec)
+                                     : glob(spec, names[i]);
+      if (match) hits.push_back(i);
+    }
+  }
+  if (hits.size() == 1) {
+    set(hits[0]);
+    return;
+  }
+  if (hits.size() > 1) {
+    std::vector<std::string_view> matched;
+    for (std::size_t i : hits) matched.push_back(names[i]);
+    throw DataError(file, header_line, spec,
+                    "matches " + std::to_string(hits.size()) + " columns (" + list_names(matched) +
+                        "); choose one with " + col.flag + " NAME or " + col.flag + " NUMBER",
+                    col.role);
+  }
+  if (!col.required) return;
+  std::string problem = "not found in the header row (columns: " + list_names(names) +
+                        "); choose the " + col.role + " column with " + col.flag + " NAME or " +
+                        col.flag + " NUMBER (1-based)";
+  if (header_numeric)
+    problem += "; the header row looks like data: check --skip-lines";
+  else if (names.size() == 1)
+    problem += "; only one column was found: check --delimiter";
+  throw DataError(file, header_line, spec, problem, col.role);
+}
+
+std::string number_problem(Num r, std::string_view cell, char decimal) {
+  switch (r) {
+    case Num::empty:
+      return "the cell is empty (fill the gap or remove the row)";
+    case Num::not_finite:
+      return show(cell) + " is NaN or infinite (remove the row or fill in a measured value)";
+    case Num::out_of_range:
+      return show(cell) + " is out of the range of a double (fix the cell or remove the row)";
+    default:
+      break;
+  }
+  std::string p = show(cell) + " is not a number (fix the cell or remove the row";
+  if (decimal == '.' && cell.find(',') != std::string_view::npos &&
+      cell.find('.') == std::string_view::npos)
+    p += "; for decimal commas use --decimal ,";
+  else if (decimal == ',' && cell.find('.') != std::string_view::npos)
+    p += "; '.' is not allowed with --decimal ,";
+  return p + ")";
+}
+
+}  // namespace
+
+LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std::string& file,
+                        std::vector<std::string>* notes) {
+  const char decimal = opt.decimal;
+  if (decimal != '.' && decimal != ',')
+    throw DataError(file, 0, "", "the decimal separator must be '.' or ','");
+  Delimiter delim = parse_delimiter(opt.delimiter, decimal, file);
+  const bool date_time = opt.time_format != "seconds" && !opt.time_format.empty();
+  std::string time_format;
+  if (date_time) {
+    const std::string why = detail::check_time_format(opt.time_format);
+    if (!why.empty())
+      throw DataError(file, 0, "", "--time-format " + show(opt.time_format) + ": " + why);
+    time_format = detail::expand_time_format(opt.time_format);
+  }
+  const bool no_time = opt.t_column == "none";
+  if (opt.sample_period && !(std::isfinite(*opt.sample_period) && *opt.sample_period > 0))
+    throw DataError(
+        file, 0, "",
+        "--sample-period must be a positive number of seconds, not " + num(*opt.sample_period));
+  if (no_time && !opt.sample_period)
+    throw DataError(file, 0, "", "without a time column (--t none) --sample-period is needed");
+
+  if (text.empty()) throw DataError(file, 0, "", "the file is empty (0 bytes)");
+  // UTF-8 byte-order mark: skipped. UTF-16 would read as garbage, so it is refused early.
+  if (text.size() >= 3 && text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);
+  if (text.size() >= 2 && (text.substr(0, 2) == "\xFF\xFE" || text.substr(0, 2) == "\xFE\xFF"))
+    throw DataError(file, 0, "", "the file is UTF-16 text; export or save it as UTF-8 (or ANSI)");
+
+  Lines lines(text);
+  std::string_view line;
+  for (std::size_t i = 0; i < opt.skip_lines; ++i) {
+    if (!lines.next(line))
+      throw DataError(file, 0, "",
+                      "the file has only " + std::to_string(lines.number()) +
+                          " lines, but --skip-lines is " + std::to_string(opt.skip_lines));
+  }
+  bool have_header = false;
+  while (lines.next(line)) {
+    if (!blank_or_comment(line)) {
+      have_header = true;
+      break;
+    }
+  }
+  if (!have_header)
+    throw DataError(file, 0, "",
+                    opt.skip_lines > 0
+                        ? "no header row after the " + std::to_string(opt.skip_lines) +
+                              " skipped lines (check --skip-lines)"
+                        : "the file has no header row, only blank or comment lines");
+  const std::size_t header_line = lines.number();
+  if (line.find('\0') != std::string_view::npos)
+    throw DataError(
+        file, header_line, "",
+        "the header row holds NUL bytes: the file is probably UTF-16; save it as UTF-8");
+  if (delim.detect) delim = detect_delimiter(line, decimal);
+  Splitter splitter(delim);
+
+  std::vector<std::string_view> names;
+  switch (splitter.split(line, kNone, names)) {
+    case Split::unterminated_quote:
+      throw DataError(file, header_line, "", "a quoted column name has no closing quote");
+    case Split::text_after_quote:
+      throw DataError(file, header_line, "", "text after a closing quote in the header row");
+    case Split::ok:
+      break;
+  }
+  const bool header_numeric =
+      !names.empty() && std::all_of(names.begin(), names.end(), looks_numeric);
+
+  Column cols[] = {
+      {"t", "--t", opt.t_column, !no_time},
+      {"op", "--op", opt.op_column, true},
+      {"pv", "--pv", opt.pv_column, true},
+      {"sp", "--sp", opt.sp_column.empty() ? "sp" : opt.sp_column,
+       !opt.sp_column.empty() && opt.sp_column != "none"},
+      {"mv", "--mv", opt.mv_column.empty() ? "mv" : opt.mv_column,
+       !opt.mv_column.empty() && opt.mv_column != "none"},
+  };
+  Column& ct = cols[0];
+  Column& cop = cols[1];
+  Column& cpv = cols[2];
+  Column& csp = cols[3];
+  Column& cmv = cols[4];
+  for (Column& c : cols) {
+    if (c.spec == "none" && c.role != std::string_view("t")) {
+      if (c.required) throw DataError(file, 0, "", std::string(c.flag) + " cannot be 'none'");
+      continue;
+    }
+    if (&c == &ct && no_time) continue;
+    if (c.spec.empty())
+      throw DataError(file, 0, "", std::string(c.flag) + " needs a column name or number");
+    resolve(c, names, file, header_line, header_numeric);
+  }
+  std::size_t need = 0;
+  for (std::size_t a = 0; a < 5; ++a) {
+    if (cols[a].index == kNone) continue;
+    need = std::max(need, cols[a].index + 1);
+    for (std::size_t b = a + 1; b < 5; ++b)
+      if (cols[b].index == cols[a].index)
+        throw DataError(file, header_line, cols[a].name,
+                        std::string("chosen for both ") + cols[a].role + " and " + cols[b].role +
+                            " (give " + cols[b].flag + " another column)");
+  }
+
+  for (std::size_t i = 0; i < opt.skip_after_header; ++i) {
+    if (!lines.next(line))
+      throw DataError(file, 0, "",
+                      "the file ends before the " + std::to_string(opt.skip_after_header) +
+                          " lines after the header row (check --skip-after-header)");
+  }
+
+  LoopData d;
+  d.source = file;
+  std::vector<std::size_t> row_line;  // file line of each sample, for later messages
+  std::vector<std::string_view> cells;
+  std::string numbuf;
+  std::string prev_time;
+  std::string first_time;
+  std::size_t prev_line = 0;
+  detail::TimeStamp t0;
+  std::string why;
+
+  auto cell_number = [&](const Column& c, std::vector<double>& out) {
+    double v = 0;
+    const Num r = parse_number(cells[c.index], decimal, numbuf, v);
+    if (r != Num::ok)
+      throw DataError(file, lines.number(), c.name, number_problem(r, cells[c.index], decimal),
+                      c.role);
+    out.push_back(v);
+  };
+
+  while (lines.next(line)) {
+    if (blank_or_comment(line)) continue;
+    const Split s = splitter.split(line, kNone, cells);
+    if (s != Split::ok)
+      throw DataError(file, lines.number(), "",
+                      s == Split::unterminated_quote
+                          ? "a quoted cell has no closing quote (fix the row or remove it)"
+                          : "text after a closing quote (fix the row or remove it)");
+    if (cells.size() < need) {
+      const Column* missing = nullptr;
+      for (const Column& c : cols)
+        if (c.index != kNone && c.index >= cells.size() &&
+            (missing == nullptr || c.index < missing->index))
+          missing = &c;
+      throw DataError(file, lines.number(), missing->name,
+                      "the row has only " + std::to_string(cells.size()) +
+                          " cells, but this is column " + std::to_string(missing->index + 1) +
+                          " (truncated row: complete it or remove it)",
+                      missing->role);
+    }
+    // More cells than names shifts columns (an unquoted decimal comma, say): refuse it.
+    for (std::size_t i = names.size(); i < cells.size(); ++i)
+      if (!cells[i].empty())
+        throw DataError(file, lines.number(), "",
+                        "the row has " + std::to_string(cells.size()) +
+                            " cells, but the header row names only " +
+                            std::to_string(names.size()) + " (cell " + std::to_string(i + 1) +
+                            " is " + show(cells[i]) +
+                            "; a decimal comma or a delimiter inside an unquoted cell?)");
+    if (ct.index != kNone) {
+      const std::string_view cell = cells[ct.index];
+      double t = 0;
+      if (date_time) {
+        detail::TimeStamp ts;
+        if (!detail::parse_time_stamp(cell, time_format, ts, why))
+          throw DataError(file, lines.number(), ct.name,
+                          show(cell) + " does not match --time-format " + show(opt.time_format) +
+                              " (" + why + ")",
+                          ct.role);
+        if (d.t.empty()) {
+          t0 = ts;
+          first_time.assign(cell);
+        }
+        t = static_cast<double>(ts.seconds - t0.seconds) + (ts.fraction - t0.fraction);
+      } else {
+        const Num r = parse_number(cell, decimal, numbuf, t);
+        if (r != Num::ok)
+          throw DataError(file, lines.number(), ct.name, number_problem(r, cell, decimal), ct.role);
+      }
+      if (!d.t.empty() && !(t > d.t.back())) {
+        std::string p = "time " + show(cell) + " is not after the previous row's " +
+                        show(prev_time) + " (line " + std::to_string(prev_line) + "): ";
+        p += t == d.t.back()
+                 ? "duplicate time stamp (remove one of the rows; if the rows are evenly spaced "
+                   "and only the stamps are wrong, use --t none with --sample-period)"
+                 : "time goes backwards (sort the rows by time; a clock change?)";
+        throw DataError(file, lines.number(), ct.name, p, ct.role);
+      }
+      d.t.push_back(t);
+      prev_time.assign(cell);
+      prev_line = lines.number();
+    }
+    cell_number(cop, d.op);
+    cell_number(cpv, d.pv);
+    if (csp.index != kNone) cell_number(csp, d.sp);
+    if (cmv.index != kNone) cell_number(cmv, d.mv);
+    row_line.push_back(lines.number());
+  }
+
+  const std::size_t n = row_line.size();
+  if (n == 0)
+    throw DataError(file, 0, "",
+                    "no data rows after the header row (line " + std::to_string(header_line) + ")");
+  if (n < 2)
+    throw DataError(file, row_line[0], "",
+                    "only 1 data row: at least 2 samples are needed (is the file complete?)");
+  if (no_time) {
+    d.t.resize(n);
+    for (std::size_t i = 0; i < n; ++i) d.t[i] = static_cast<double>(i) * *opt.sample_period;
+  }
+
+  if (notes) {
+    std::string s = "columns:";
+    for (const Column& c : cols)
+      if (c.index != kNone)
+        s += std::string(s.back() == ':' ? " " : ", ") + c.role + " = " + show(c.name) + " (" +
+             std::to_string(c.index + 1) + ")";
+    if (no_time) s += "; no time column, rows " + num(*opt.sample_period) + " s apart";
+    notes->push_back(s);
+  }
+
+  // Sampling: steps against the median step.
+  std::vector<double> dt(n - 1);
+  for (std::size_t i = 0; i + 1 < n; ++i) dt[i] = d.t[i + 1] - d.t[i];
+  if (!std::isfinite(d.t.back() - d.t.front()))
+    throw DataError(file, 0, ct.name, "the time span is too large for a double", ct.role);
+  std::vector<double> sorted = dt;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
+                   sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  std::size_t worst = 0, irregular = 0;
+  for (std::size_t i = 0; i < dt.size(); ++i) {
+    const double dev = std::fabs(dt[i] - median);
+    if (dev > std::fabs(dt[worst] - median)) worst = i;
+    if (dev > kSamplingTolerance * median) ++irregular;
+  }
+  const double max_dev = std::fabs(dt[worst] - median);
+  const double grid = opt.sample_period ? *opt.sample_period : median;
+  const bool period_differs =
+      opt.sample_period && std::fabs(*opt.sample_period - median) > kSamplingTolerance * median;
+
+  if (!opt.resample) {
+    if (irregular > 0)
+      throw DataError(file, row_line[worst + 1], ct.name,
+                      "irregular sampling: the step to this row is " + num(dt[worst]) +
+                          " s, the median step is " + num(median) + " s (max deviation " +
+                          num(max_dev) + " s; " + std::to_string(irregular) + " of " +
+                          std::to_string(dt.size()) + " steps are more than " +
+                          num(kSamplingTolerance * 100) +
+                          " % off); use --resample to interpolate onto a uniform grid",
+                      ct.role);
+    if (period_differs)
+      throw DataError(file, 0, ct.name,
+                      "the rows are " + num(median) + " s apart, but --sample-period is " +
+                          num(*opt.sample_period) +
+                          " (leave it out, or add --resample to resample the data)",
+                      ct.role);
+  }
+
+  if (notes && date_time)
+    notes->push_back("t = 0 s is " + show(first_time) + " (line " + std::to_string(row_line[0]) +
+                     "); time stamps are read as given, without time zone or daylight saving");
+
+  // Resample whenever asked and the steps are not already uniform (to rounding).
+  bool resampled = false;
+  if (opt.resample && (period_differs || max_dev > 1e-9 * median)) {
+    const double span = d.t.back() - d.t.front();
+    const double steps = std::floor(span / grid + 1e-9);
+    // More points than this comes from a wrong --sample-period, and would exhaust memory.
+    const double max_points =
+        std::min(kMaxGridPoints, std::max(1e6, 100.0 * static_cast<double>(n)));
+    if (!(steps + 1 <= max_points))
+      throw DataError(file, 0, ct.name,
+                      "resampling " + num(span) + " s at " + num(grid) + " s would give " +
+                          num(steps + 1) + " samples (choose a larger --sample-period)",
+                      ct.role);
+    if (steps < 1)
+      throw DataError(
+          file, 0, ct.name,
+          "the data span " + num(span) + " s, less than one --sample-period of " + num(grid) + " s",
+          ct.role);
+    const std::size_t m = static_cast<std::size_t>(steps) + 1;
+    std::vector<double> nt(m);
+    std::vector<std::size_t> seg(m);  // left sample of the interval holding each grid point
+    std::vector<double> w(m);
+    std::size_t j = 0;
+    for (std::size_t k = 0; k < m; ++k) {
+      nt[k] = d.t.front() + static_cast<double>(k) * grid;
+      while (j + 2 < n && d.t[j + 1] < nt[k]) ++j;
+      seg[k] = j;
+      w[k] = std::clamp((nt[k] - d.t[j]) / (d.t[j + 1] - d.t[j]), 0.0, 1.0);
+    }
+    auto interp = [&](std::vector<double>& v, const Column& c) {
+      if (v.empty()) return;
+      std::vector<double> out(m);
+      for (std::size_t k = 0; k < m; ++k) {
+        const double a = v[seg[k]], b = v[seg[k] + 1];
+        out[k] = a + w[k] * (b - a);
+        if (!std::isfinite(out[k])) out[k] = (1 - w[k]) * a + w[k] * b;  // b - a overflowed
+        if (!std::isfinite(out[k]))
+          throw DataError(file, row_line[seg[k] + 1], c.name,
+                          "values too large to interpolate (" + num(a) + ", " + num(b) + ")",
+                          c.role);
+      }
+      v = std::move(out);
+    };
+    interp(d.op, cop);
+    interp(d.pv, cpv);
+    interp(d.sp, csp);
+    interp(d.mv, cmv);
+    if (notes) {
+      const auto [lo, hi] = std::minmax_element(dt.begin(), dt.end());
+      const std::size_t gap = static_cast<std::size_t>(hi - dt.begin());
+      std::string s = "resampled " + std::to_string(n) + " rows onto a uniform " + num(grid) +
+                      " s grid (" + (opt.sample_period ? "--sample-period" : "the median step") +
+                      "): " + std::to_string(m) + " samples; the steps in the file ranged from " +
+                      num(*lo) + " to " + num(*hi) + " s (largest before line " +
+                      std::to_string(row_line[gap + 1]) + ")";
+      if (*hi > 2 * grid) s += "; values inside gaps are interpolated, not measured";
+      notes->push_back(s);
+    }
+    d.t = std::move(nt);
+    resampled = true;
+  }
+
+  // After resampling: a coarse grid can step over the only rows where OP moves.
+  const auto [op_min, op_max] = std::minmax_element(d.op.begin(), d.op.end());
+  if (*op_min == *op_max)
+    throw DataError(file, 0, cop.name,
+                    "constant at " + num(*op_min) + " in all " + std::to_string(d.size()) +
+                        (resampled ? " resampled samples" : " rows") +
+                        ": nothing to identify (is " + cop.flag + " the controller output?)",
+                    cop.role);
+  return d;
+}
+
+LoopData read_loop_csv(const std::string& path, const CsvOptions& options,
+                       std::vector<std::string>* notes) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw DataError(path, 0, "", "is a directory, not a data file (give the path of a CSV file)");
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr)
+    throw DataError(
+        path, 0, "",
+        "cannot open the file: " + std::generic_category().message(errno) + " (check the path)");
+  std::string text;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (!ec) text.reserve(size);  // a hint only: pipes and growing files are read to the end
+  char buf[1 << 16];
+  std::size_t k;
+  while ((k = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, k);
+  const bool failed = std::ferror(f) != 0;
+  std::fclose(f);
+  if (failed)
+    throw DataError(path, 0, "",
+                    "reading the file failed: " + std::generic_category().message(errno));
+  return parse_loop_csv(text, options, path, notes);
+}
+
+}  // namespace valvediag
