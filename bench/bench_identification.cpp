@@ -39,7 +39,8 @@ double baseline_config(const Eigen::MatrixXd& G, const std::vector<double>& y, i
       const auto r = static_cast<Eigen::Index>(t - t0);
       for (int i = 0; i < na; ++i) W(r, i) = -y[t - static_cast<std::size_t>(i + 1)];
       W(r, na) = 1.0;
-      W.row(r).tail(K) = sgn * G.row(static_cast<Eigen::Index>(t - static_cast<std::size_t>(nk + 1)));
+      W.row(r).tail(K) =
+          sgn * G.row(static_cast<Eigen::Index>(t - static_cast<std::size_t>(nk + 1)));
       Y[r] = y[t];
     }
     Eigen::MatrixXd H = W.transpose() * W;
@@ -48,7 +49,8 @@ double baseline_config(const Eigen::MatrixXd& G, const std::vector<double>& y, i
     NonnegativeQp qp(H, f, na + 1);
     auto r = qp.solve();
     const double total = r.x.tail(K).sum();
-    auto path = qp.solve_budgets(r, {total, 0.99 * total, 0.98 * total, 0.97 * total, 0.96 * total, 0.95 * total});
+    auto path = qp.solve_budgets(
+        r, {total, 0.99 * total, 0.98 * total, 0.97 * total, 0.96 * total, 0.95 * total});
     for (const auto& p : path) {
       Eigen::VectorXd x = G * p.x.tail(K) * sgn;
       std::vector<double> ys(N);
@@ -93,7 +95,8 @@ Figures in_child(F&& body) {
   }
   close(fd[1]);
   Figures f;
-  if (read(fd[0], &f, sizeof f) != static_cast<ssize_t>(sizeof f)) std::fprintf(stderr, "child failed\n");
+  if (read(fd[0], &f, sizeof f) != static_cast<ssize_t>(sizeof f))
+    std::fprintf(stderr, "child failed\n");
   close(fd[0]);
   int status = 0;
   struct rusage ru {};
@@ -117,10 +120,13 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[i], "--quick")) big = false;
   }
   const Scenario sc = scenario_by_name("paper-ex1");
-  std::printf("valvediag identification benchmark: paper-ex1 loop, default grid (na<=3, nb<=3, nk<=10, L=2..20)\n");
+  std::printf(
+      "valvediag identification benchmark: paper-ex1 loop, default grid (na<=3, nb<=3, nk<=10, "
+      "L=2..20)\n");
   std::printf("machine: %ld cores; medians of %d runs; each case in its own process (peak RSS)\n\n",
               sysconf(_SC_NPROCESSORS_ONLN), repeats);
-  std::printf("%-9s %-10s %8s %10s %12s %10s %9s\n", "N", "method", "configs", "wall s", "configs/s", "RSS MB", "fitness");
+  std::printf("%-9s %-10s %8s %10s %12s %10s %9s\n", "N", "method", "configs", "wall s",
+              "configs/s", "RSS MB", "fitness");
   std::vector<std::size_t> sizes{1500, 25000};
   for (std::size_t N : sizes) {
     const LoopData d = run_scenario(sc, 1, N);
@@ -139,10 +145,11 @@ int main(int argc, char** argv) {
       secs.push_back(fast.seconds);
     }
     const double fast_s = median(secs);
-    std::printf("%-9zu %-10s %8.0f %10.3f %12.0f %10.1f %8.2f%%\n", N, "valvediag", fast.configs, fast_s,
-                fast.configs / fast_s, fast.rss_kb / 1024.0, fast.fitness);
+    std::printf("%-9zu %-10s %8.0f %10.3f %12.0f %10.1f %8.2f%%\n", N, "valvediag", fast.configs,
+                fast_s, fast.configs / fast_s, fast.rss_kb / 1024.0, fast.fitness);
     // Baseline on a subset of the grid (nb = 1, na 1..3, nk in {0, 5, 10}, every L): the full
-    // grid would take hours at N = 25,000. nb = 1 is the cheapest kind, so the ratio is conservative.
+    // grid would take hours at N = 25,000. nb = 1 is the cheapest kind, so the ratio is
+    // conservative.
     Figures base = in_child([&] {
       const auto t0 = Clock::now();
       const std::size_t start = 13;
@@ -154,7 +161,8 @@ int main(int argc, char** argv) {
         Eigen::MatrixXd G(static_cast<Eigen::Index>(N), g.relay_count());
         for (std::size_t t = 0; t < N; ++t) {
           st.move_to(g.level(d.op[t]));
-          for (int k = 0; k < g.relay_count(); ++k) G(static_cast<Eigen::Index>(t), k) = st.relay(k);
+          for (int k = 0; k < g.relay_count(); ++k)
+            G(static_cast<Eigen::Index>(t), k) = st.relay(k);
         }
         for (int nk : {0, 5, 10})
           for (int na = 1; na <= 3; ++na) {
@@ -168,8 +176,9 @@ int main(int argc, char** argv) {
       f.fitness = best;
       return f;
     });
-    std::printf("%-9zu %-10s %8.0f %10.3f %12.1f %10.1f %8.2f%%   (subset, nb = 1)\n", N, "baseline", base.configs,
-                base.seconds, base.configs / base.seconds, base.rss_kb / 1024.0, base.fitness);
+    std::printf("%-9zu %-10s %8.0f %10.3f %12.1f %10.1f %8.2f%%   (subset, nb = 1)\n", N,
+                "baseline", base.configs, base.seconds, base.configs / base.seconds,
+                base.rss_kb / 1024.0, base.fitness);
     std::printf("%-9s speed-up in configurations per second: %.0fx\n\n", "",
                 (fast.configs / fast_s) / (base.configs / base.seconds));
   }
@@ -185,10 +194,13 @@ int main(int argc, char** argv) {
       r.fitness = res.fitness_percent;
       return r;
     });
-    std::printf("%-9zu %-10s %8.0f %10.3f %12.0f %10.1f %8.2f%%   (one run; includes the data in memory)\n", N,
-                "valvediag", f.configs, f.seconds, f.configs / f.seconds, f.rss_kb / 1024.0, f.fitness);
+    std::printf(
+        "%-9zu %-10s %8.0f %10.3f %12.0f %10.1f %8.2f%%   (one run; includes the data in memory)\n",
+        N, "valvediag", f.configs, f.seconds, f.configs / f.seconds, f.rss_kb / 1024.0, f.fitness);
   }
-  std::printf("\npaper: about 0.15 s for one configuration at L = 20 (i5-2450); goals: 1,881 configurations\n"
-              "in < 1 s at N = 1,500 and < 3 s at N = 25,000; peak RSS < 200 MB at N = 10^6.\n");
+  std::printf(
+      "\npaper: about 0.15 s for one configuration at L = 20 (i5-2450); goals: 1,881 "
+      "configurations\n"
+      "in < 1 s at N = 1,500 and < 3 s at N = 25,000; peak RSS < 200 MB at N = 10^6.\n");
   return 0;
 }

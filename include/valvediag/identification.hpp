@@ -49,7 +49,7 @@ struct FitOptions {
   // fewest linear parameters (na + nb), then the coarsest L, then the smallest nk wins. Fitness
   // alone always prefers a bigger equivalent model by a hair (pole-zero near-cancellations).
   double parsimony_percent = 0.1;
-  int threads = 0;                // 0: all cores
+  int threads = 0;  // 0: all cores
   bool keep_all_configurations = true;
 };
 

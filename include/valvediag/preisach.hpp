@@ -1,4 +1,5 @@
-// Discretized Preisach model (paper eqs 9-15, 23), read as ../shared/design/method-notes.md fixes it.
+// Discretized Preisach model (paper eqs 9-15, 23), read as ../shared/design/method-notes.md fixes
+// it.
 //
 // Thresholds u_i = umin + (i-1) delta, i = 1..L+1. The virtual input level v in 0..L is the index
 // of the threshold nearest to u (eq 23). Relay (i, j), 1 <= i <= j <= L:

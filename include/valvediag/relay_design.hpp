@@ -5,8 +5,8 @@
 // distinct states. Each sample t gets the index s(t) of its state; the distinct states' relay
 // vectors form the D x K' matrix `gamma` (relays with identical histories merged into one column,
 // relays that never switch dropped: their effect is a constant, absorbed by c). Every sum the
-// least-squares problems need is a D-vector or a sparse D x D count built in one pass over the data,
-// then mapped to relay space once per L.
+// least-squares problems need is a D-vector or a sparse D x D count built in one pass over the
+// data, then mapped to relay space once per L.
 #pragma once
 
 #include <Eigen/Dense>
@@ -47,7 +47,9 @@ class RelayDesign {
   std::size_t end() const { return end_; }
 
   // Relay-space statistics over the equation window [start, end):
-  const Eigen::VectorXd& g(int d) const { return g_[static_cast<std::size_t>(d)]; }  // sum gamma(t-d)
+  const Eigen::VectorXd& g(int d) const {
+    return g_[static_cast<std::size_t>(d)];
+  }                                               // sum gamma(t-d)
   const Eigen::VectorXd& r(int d, int i) const {  // sum gamma(t-d) y(t-i)
     return r_[static_cast<std::size_t>(d)][static_cast<std::size_t>(i)];
   }

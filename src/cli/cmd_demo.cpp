@@ -10,7 +10,8 @@ namespace valvediag::cli {
 
 void add_demo(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
-      "demo", "Simulate the paper's Example 1 (PI loop, He stiction), identify it, compare with the paper");
+      "demo",
+      "Simulate the paper's Example 1 (PI loop, He stiction), identify it, compare with the paper");
   cmd->footer("Example:\n  valvediag demo\n  valvediag demo --seed 7 --json ex1.json");
   struct Args {
     std::uint64_t seed = 1;
@@ -23,7 +24,8 @@ void add_demo(CLI::App& app, int& exit_code) {
     const Scenario s = scenario_by_name("paper-ex1");
     std::cout << "Simulating scenario 'paper-ex1': " << s.description << "\n";
     const LoopData d = run_scenario(s, a->seed, 0);
-    std::cout << "Identifying over the paper's full grid (na <= 3, nb <= 3, nk <= 10, L <= 20) ...\n\n";
+    std::cout
+        << "Identifying over the paper's full grid (na <= 3, nb <= 3, nk <= 10, L <= 20) ...\n\n";
     FitOptions fo;
     FitRun run = run_fit(d, fo, "pv");
     std::cout << run.summary << "\n";

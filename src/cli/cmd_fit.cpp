@@ -17,6 +17,7 @@ struct FitArgs {
   std::string data;
   CsvOptions csv;
   std::string sample_period;
+  std::string decimal = ".";
   FitOptions fit;
   std::string method = "joint", stop = "cost", normalization = "nonnegative", memory = "estimate";
   std::string output = "pv";
@@ -43,16 +44,19 @@ std::size_t validation_start(const LoopData& d, const std::string& spec, FitOpti
     v = std::stod(s, &pos);
     if (pos != s.size()) throw std::invalid_argument("trailing");
   } catch (const std::exception&) {
-    throw UsageError("--validate '" + spec + "': give a fraction (0.3) or a start time (t=600 or 600s)");
+    throw UsageError("--validate '" + spec +
+                     "': give a fraction (0.3) or a start time (t=600 or 600s)");
   }
   if (!time) {
-    if (!(v > 0 && v < 0.9)) throw UsageError("--validate fraction must lie in (0, 0.9), got " + spec);
+    if (!(v > 0 && v < 0.9))
+      throw UsageError("--validate fraction must lie in (0, 0.9), got " + spec);
     fo.validation_fraction = v;
     return 0;
   }
   const auto it = std::lower_bound(d.t.begin(), d.t.end(), d.t.front() + v);
   const auto idx = static_cast<std::size_t>(it - d.t.begin());
-  if (idx == 0 || idx >= d.size()) throw UsageError("--validate " + spec + " lies outside the data's time range");
+  if (idx == 0 || idx >= d.size())
+    throw UsageError("--validate " + spec + " lies outside the data's time range");
   return idx;
 }
 
@@ -64,73 +68,137 @@ void add_fit(CLI::App& app, int& exit_code) {
       "Examples:\n"
       "  valvediag fit loop.csv --json model.json --series-out series.csv\n"
       "  valvediag fit loop.csv --validate 0.3 --select-on validation\n"
-      "  valvediag fit export.txt --delimiter tab --skip-lines 5 --t time --op 2 --pv 3\n"
-      "  valvediag fit valve.csv --output mv           (valve position measured: identity linear block)\n"
-      "  valvediag fit loop.csv --method alternation --stop parameter --normalization paper-sign   (the paper)");
+      "  valvediag fit export.txt --delimiter tab --skip-lines 2 --skip-after-header 2 \\\n"
+      "      --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV'   "
+      "(historian export)\n"
+      "  valvediag fit valve.csv --output mv           (valve position measured: identity linear "
+      "block)\n"
+      "  valvediag fit loop.csv --method alternation --stop parameter --normalization paper-sign   "
+      "(the paper)");
   auto a = std::make_shared<FitArgs>();
   cmd->add_option("data", a->data, "CSV file with columns t, op, pv (optional sp, mv)")->required();
   auto* g_in = "Input";
-  cmd->add_option("--t", a->csv.t_column, "time column name or 1-based index ('none': no time column)")->group(g_in)->capture_default_str();
-  cmd->add_option("--op", a->csv.op_column, "controller output column")->group(g_in)->capture_default_str();
-  cmd->add_option("--pv", a->csv.pv_column, "process variable column")->group(g_in)->capture_default_str();
+  cmd->add_option("--t", a->csv.t_column,
+                  "time column name or 1-based index ('none': no time column)")
+      ->group(g_in)
+      ->capture_default_str();
+  cmd->add_option("--op", a->csv.op_column, "controller output column")
+      ->group(g_in)
+      ->capture_default_str();
+  cmd->add_option("--pv", a->csv.pv_column, "process variable column")
+      ->group(g_in)
+      ->capture_default_str();
   cmd->add_option("--sp", a->csv.sp_column, "set point column ('none' to ignore)")->group(g_in);
-  cmd->add_option("--mv", a->csv.mv_column, "measured valve position column ('none' to ignore)")->group(g_in);
-  cmd->add_option("--delimiter", a->csv.delimiter, "',', ';', 'tab', 'space' or 'auto'")->group(g_in)->capture_default_str();
+  cmd->add_option("--mv", a->csv.mv_column, "measured valve position column ('none' to ignore)")
+      ->group(g_in);
+  cmd->add_option("--delimiter", a->csv.delimiter, "',', ';', 'tab', 'space' or 'auto'")
+      ->group(g_in)
+      ->capture_default_str();
   cmd->add_option("--skip-lines", a->csv.skip_lines, "lines before the header row")->group(g_in);
-  cmd->add_option("--skip-after-header", a->csv.skip_after_header, "lines between header and data")->group(g_in);
-  cmd->add_option("--time-format", a->csv.time_format, "'seconds' or a pattern like '%Y-%m-%d %H:%M:%S'")->group(g_in)->capture_default_str();
-  cmd->add_flag("--resample", a->csv.resample, "interpolate irregular sampling onto a uniform grid")->group(g_in);
-  cmd->add_option("--sample-period", a->sample_period, "sample period in s (with --resample or without a time column)")->group(g_in);
+  cmd->add_option("--skip-after-header", a->csv.skip_after_header, "lines between header and data")
+      ->group(g_in);
+  cmd->add_option("--time-format", a->csv.time_format,
+                  "'seconds' or a pattern like '%Y-%m-%d %H:%M:%S'")
+      ->group(g_in)
+      ->capture_default_str();
+  cmd->add_option("--decimal", a->decimal, "decimal separator in numbers: '.' or ','")
+      ->check(CLI::IsMember({".", ","}))
+      ->group(g_in)
+      ->capture_default_str();
+  cmd->add_flag("--resample", a->csv.resample, "interpolate irregular sampling onto a uniform grid")
+      ->group(g_in);
+  cmd->add_option("--sample-period", a->sample_period,
+                  "sample period in s (with --resample or without a time column)")
+      ->group(g_in);
 
   auto* g_m = "Model";
   cmd->add_option("--na-max", a->fit.na_max, "largest A order")->group(g_m)->capture_default_str();
   cmd->add_option("--nb-max", a->fit.nb_max, "largest B order")->group(g_m)->capture_default_str();
-  cmd->add_option("--nk-max", a->fit.nk_max, "largest delay in samples")->group(g_m)->capture_default_str();
-  cmd->add_option("--L-max", a->fit.L_max, "largest Preisach discretization level")->group(g_m)->capture_default_str();
+  cmd->add_option("--nk-max", a->fit.nk_max, "largest delay in samples")
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_option("--L-max", a->fit.L_max, "largest Preisach discretization level")
+      ->group(g_m)
+      ->capture_default_str();
   cmd->add_option("--na-min", a->fit.na_min, "smallest A order")->group(g_m);
   cmd->add_option("--nb-min", a->fit.nb_min, "smallest B order")->group(g_m);
   cmd->add_option("--nk-min", a->fit.nk_min, "smallest delay")->group(g_m);
-  cmd->add_option("--L-min", a->fit.L_min, "smallest Preisach level")->group(g_m)->capture_default_str();
-  cmd->add_option("--output", a->output, "fit pv (process) or mv (measured valve position, identity block)")
-      ->check(CLI::IsMember({"pv", "mv"}))->group(g_m)->capture_default_str();
-  cmd->add_option("--method", a->method, "joint (exact in a, c, mu) or alternation (the paper's eqs 17-19)")
-      ->check(CLI::IsMember({"joint", "alternation"}))->group(g_m)->capture_default_str();
-  cmd->add_option("--stop", a->stop, "alternation stop: cost (relative decrease) or parameter (paper's 1 % rule)")
-      ->check(CLI::IsMember({"cost", "parameter"}))->group(g_m)->capture_default_str();
-  cmd->add_option("--normalization", a->normalization, "nonnegative (gain sign in b) or paper-sign (eq 19)")
-      ->check(CLI::IsMember({"nonnegative", "paper-sign"}))->group(g_m)->capture_default_str();
-  cmd->add_option("--initial-memory", a->memory, "estimate, or rising (OP came up from its minimum)")
-      ->check(CLI::IsMember({"estimate", "rising"}))->group(g_m)->capture_default_str();
-  cmd->add_flag("--bic-simulated", a->fit.bic_on_simulated_output,
-                "BIC from the simulated output (paper, O(N) per kappa) instead of the equation error")->group(g_m);
-  cmd->add_flag("--no-merge", a->no_merge, "do not merge relays with identical histories")->group(g_m);
-  cmd->add_option("--max-iterations", a->fit.max_iterations, "inner iteration cap")->group(g_m)->capture_default_str();
-  cmd->add_option("--parsimony", a->fit.parsimony_percent, "prefer the smallest model within this many fitness points")->group(g_m)->capture_default_str();
+  cmd->add_option("--L-min", a->fit.L_min, "smallest Preisach level")
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_option("--output", a->output,
+                  "fit pv (process) or mv (measured valve position, identity block)")
+      ->check(CLI::IsMember({"pv", "mv"}))
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_option("--method", a->method,
+                  "joint (exact in a, c, mu) or alternation (the paper's eqs 17-19)")
+      ->check(CLI::IsMember({"joint", "alternation"}))
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_option("--stop", a->stop,
+                  "alternation stop: cost (relative decrease) or parameter (paper's 1 % rule)")
+      ->check(CLI::IsMember({"cost", "parameter"}))
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_option("--normalization", a->normalization,
+                  "nonnegative (gain sign in b) or paper-sign (eq 19)")
+      ->check(CLI::IsMember({"nonnegative", "paper-sign"}))
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_option("--initial-memory", a->memory,
+                  "estimate, or rising (OP came up from its minimum)")
+      ->check(CLI::IsMember({"estimate", "rising"}))
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_flag(
+         "--bic-simulated", a->fit.bic_on_simulated_output,
+         "BIC from the simulated output (paper, O(N) per kappa) instead of the equation error")
+      ->group(g_m);
+  cmd->add_flag("--no-merge", a->no_merge, "do not merge relays with identical histories")
+      ->group(g_m);
+  cmd->add_option("--max-iterations", a->fit.max_iterations, "inner iteration cap")
+      ->group(g_m)
+      ->capture_default_str();
+  cmd->add_option("--parsimony", a->fit.parsimony_percent,
+                  "prefer the smallest model within this many fitness points")
+      ->group(g_m)
+      ->capture_default_str();
   cmd->add_option("--threads", a->fit.threads, "worker threads (0: all cores)")->group(g_m);
 
   auto* g_v = "Validation and output";
-  cmd->add_option("--validate", a->validate, "hold out the last fraction (0.3) or from a time on (t=600)")->group(g_v);
-  cmd->add_option("--select-on", a->select_on, "choose the configuration on estimation or validation fitness")
-      ->check(CLI::IsMember({"estimation", "validation"}))->group(g_v)->capture_default_str();
+  cmd->add_option("--validate", a->validate,
+                  "hold out the last fraction (0.3) or from a time on (t=600)")
+      ->group(g_v);
+  cmd->add_option("--select-on", a->select_on,
+                  "choose the configuration on estimation or validation fitness")
+      ->check(CLI::IsMember({"estimation", "validation"}))
+      ->group(g_v)
+      ->capture_default_str();
   cmd->add_option("--json", a->json, "write the result as JSON")->group(g_v);
-  cmd->add_option("--series-out", a->series, "write t, op, pv, x_hat, pv_sim, residual as CSV")->group(g_v);
+  cmd->add_option("--series-out", a->series, "write t, op, pv, x_hat, pv_sim, residual as CSV")
+      ->group(g_v);
 
   cmd->callback([a, &exit_code] {
     if (!a->sample_period.empty()) {
       try {
         a->csv.sample_period = std::stod(a->sample_period);
       } catch (const std::exception&) {
-        throw UsageError("--sample-period must be a number of seconds, got '" + a->sample_period + "'");
+        throw UsageError("--sample-period must be a number of seconds, got '" + a->sample_period +
+                         "'");
       }
     }
+    a->csv.decimal = a->decimal[0];
     std::vector<std::string> notes;
     if (a->output == "mv" && a->csv.mv_column.empty()) a->csv.mv_column = "mv";
     LoopData d = read_loop_csv(a->data, a->csv, &notes);
     FitOptions& fo = a->fit;
     fo.method = a->method == "joint" ? FitMethod::Joint : FitMethod::Alternation;
     fo.stop_rule = a->stop == "cost" ? StopRule::CostDecrease : StopRule::ParameterChange;
-    fo.normalization = a->normalization == "nonnegative" ? Normalization::KeepMuNonnegative : Normalization::PaperSign;
-    fo.initial_memory = a->memory == "estimate" ? InitialMemory::Estimate : InitialMemory::RisingFromMin;
+    fo.normalization = a->normalization == "nonnegative" ? Normalization::KeepMuNonnegative
+                                                         : Normalization::PaperSign;
+    fo.initial_memory =
+        a->memory == "estimate" ? InitialMemory::Estimate : InitialMemory::RisingFromMin;
     fo.merge_identical_relays = !a->no_merge;
     fo.block = a->output == "mv" ? LinearBlock::Identity : LinearBlock::Arx;
     if (!a->validate.empty()) fo.validation_start = validation_start(d, a->validate, fo);
@@ -138,7 +206,8 @@ void add_fit(CLI::App& app, int& exit_code) {
     if (fo.select_on_validation && a->validate.empty())
       throw UsageError("--select-on validation needs --validate (a fraction or a start time)");
     if (fo.block == LinearBlock::Identity && !d.has_mv())
-      throw UsageError(a->data + ": --output mv needs a valve position column (name it with --mv COLUMN)");
+      throw UsageError(a->data +
+                       ": --output mv needs a valve position column (name it with --mv COLUMN)");
     if (auto msg = validate(fo); !msg.empty()) throw UsageError(msg);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     FitRun run = run_fit(d, fo, a->output);

@@ -10,8 +10,9 @@
 namespace valvediag::cli {
 
 FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output) {
-  const std::string model = "this model (na <= " + std::to_string(fo.na_max) + ", nb <= " + std::to_string(fo.nb_max) +
-                            ", nk <= " + std::to_string(fo.nk_max) + ", L <= " + std::to_string(fo.L_max) + ")";
+  const std::string model =
+      "this model (na <= " + std::to_string(fo.na_max) + ", nb <= " + std::to_string(fo.nb_max) +
+      ", nk <= " + std::to_string(fo.nk_max) + ", L <= " + std::to_string(fo.L_max) + ")";
   LoopData checked = d;
   if (output == "mv") checked.pv = d.mv;  // the identity block fits the valve position
   check_identifiable_data(checked, minimum_samples(fo), model);
@@ -38,7 +39,9 @@ void write_series(const std::string& path, const LoopData& d, const FitRun& run)
 
 void write_text(const std::string& path, const std::string& text) {
   std::ofstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error("cannot write " + path + ": check the directory exists and is writable");
+  if (!f)
+    throw std::runtime_error("cannot write " + path +
+                             ": check the directory exists and is writable");
   f << text;
   if (!f) throw std::runtime_error("writing " + path + " failed (disk full?)");
 }

@@ -10,7 +10,8 @@
 int main(int argc, char** argv) {
   using namespace valvediag::cli;
   CLI::App app{
-      "valvediag: diagnose sticky control valves from OP/PV data with a Preisach-Hammerstein model.\n"
+      "valvediag: diagnose sticky control valves from OP/PV data with a Preisach-Hammerstein "
+      "model.\n"
       "Run 'valvediag CMD --help' for a command's options and an example."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "valvediag 0.1.0");
@@ -29,7 +30,8 @@ int main(int argc, char** argv) {
     }
     for (auto* sub : app.get_subcommands({}))
       if (sub->get_name() == topic) {
-        std::cout << sub->get_formatter()->make_help(sub, "valvediag " + topic, CLI::AppFormatMode::Sub);
+        std::cout << sub->get_formatter()->make_help(sub, "valvediag " + topic,
+                                                     CLI::AppFormatMode::Sub);
         return;
       }
     throw UsageError("unknown command '" + topic + "'; 'valvediag help' lists them");

@@ -27,7 +27,8 @@ std::vector<double> simulate_arx(const HammersteinModel& m, const std::vector<do
   for (std::size_t t = t0; t < N; ++t) {
     double v = m.c;
     for (int i = 1; i <= na; ++i)
-      if (t >= static_cast<std::size_t>(i)) v -= m.a[static_cast<std::size_t>(i - 1)] * ys[t - static_cast<std::size_t>(i)];
+      if (t >= static_cast<std::size_t>(i))
+        v -= m.a[static_cast<std::size_t>(i - 1)] * ys[t - static_cast<std::size_t>(i)];
     for (int k = 1; k <= nb; ++k) {
       const std::size_t d = static_cast<std::size_t>(nk + k);
       if (t >= d) v += m.b[static_cast<std::size_t>(k - 1)] * x[t - d];

@@ -78,7 +78,8 @@ Identifiability analyse_identifiability(const PreisachGrid& grid, const std::vec
     for (int x : v) ++count[x];
     int best = 0;
     for (const auto& [lvl, c] : count) {
-      int near = c + (count.count(lvl - 1) ? count[lvl - 1] : 0) + (count.count(lvl + 1) ? count[lvl + 1] : 0);
+      int near = c + (count.count(lvl - 1) ? count[lvl - 1] : 0) +
+                 (count.count(lvl + 1) ? count[lvl + 1] : 0);
       best = std::max(best, near);
     }
     return best >= 0.8 * static_cast<double>(v.size());
@@ -88,16 +89,20 @@ Identifiability analyse_identifiability(const PreisachGrid& grid, const std::vec
     r.kind = ExcitationKind::Insufficient;
     s << "the input hardly reverses (" << r.reversals
       << " reversals): the valve's hysteresis is not excited and its weights are not identifiable";
-  } else if (maxima.size() >= 2 && minima.size() >= 2 && concentrated(maxima) && concentrated(minima)) {
+  } else if (maxima.size() >= 2 && minima.size() >= 2 && concentrated(maxima) &&
+             concentrated(minima)) {
     r.kind = ExcitationKind::TwoExtremes;
-    s << "the input oscillates between two extremes (Proposition 3): only about 2L-1 = " << 2 * grid.L - 1
-      << " combinations of the " << r.relays << " weights are identifiable (" << r.identifiable_combinations
-      << " on this data); read the weights as the loop's ascending and descending paths, not one by one";
+    s << "the input oscillates between two extremes (Proposition 3): only about 2L-1 = "
+      << 2 * grid.L - 1 << " combinations of the " << r.relays << " weights are identifiable ("
+      << r.identifiable_combinations
+      << " on this data); read the weights as the loop's ascending and descending paths, not one "
+         "by one";
   } else {
     r.kind = ExcitationKind::General;
     s << "general input with " << r.reversals << " reversals; its extrema cover "
-      << static_cast<int>(100 * r.threshold_coverage + 0.5) << " % of the thresholds (Lemma 1 wants all); "
-      << r.identifiable_combinations << " of " << r.relays << " weight combinations are identifiable";
+      << static_cast<int>(100 * r.threshold_coverage + 0.5)
+      << " % of the thresholds (Lemma 1 wants all); " << r.identifiable_combinations << " of "
+      << r.relays << " weight combinations are identifiable";
   }
   r.summary = s.str();
   return r;

@@ -74,7 +74,8 @@ class ConfigSolver {
       const int dk = lags_[static_cast<std::size_t>(k)];
       const double bk = b[k];
       if (bk == 0.0) continue;
-      for (int i = 0; i < na_; ++i) H.block(i, na_ + 1, 1, Kp()) -= bk * D_.r(dk, i + 1).transpose();
+      for (int i = 0; i < na_; ++i)
+        H.block(i, na_ + 1, 1, Kp()) -= bk * D_.r(dk, i + 1).transpose();
       H.block(c, na_ + 1, 1, Kp()) += bk * D_.g(dk).transpose();
       f.tail(Kp()) += bk * D_.r(dk, 0);
       Hmu += (bk * bk) * D_.Q(dk, dk);
@@ -134,7 +135,8 @@ class ConfigSolver {
     for (std::size_t t = t0; t < N; ++t) {
       double v = c;
       for (int i = 0; i < na_; ++i) v -= a[i] * ys[t - static_cast<std::size_t>(i + 1)];
-      for (int k = 0; k < nb_; ++k) v += b[k] * w[st[t - static_cast<std::size_t>(lags_[static_cast<std::size_t>(k)])]];
+      for (int k = 0; k < nb_; ++k)
+        v += b[k] * w[st[t - static_cast<std::size_t>(lags_[static_cast<std::size_t>(k)])]];
       ys[t] = v;
     }
     return ys;
@@ -283,7 +285,8 @@ class ConfigSolver {
       joint_system(b, H, f);
       const int m0 = na_ + 1;
       Eigen::MatrixXd Hmu = H.bottomRightCorner(Kp(), Kp());
-      Eigen::VectorXd fmu = f.tail(Kp()) - H.block(m0, 0, Kp(), na_) * a - H.block(m0, na_, Kp(), 1) * c;
+      Eigen::VectorXd fmu =
+          f.tail(Kp()) - H.block(m0, 0, Kp(), na_) * a - H.block(m0, na_, Kp(), 1) * c;
       NonnegativeQp qp(Hmu, fmu, 0);
       NnlsResult r = qp.solve(warm);
       iterations_ += r.iterations;
@@ -301,8 +304,9 @@ class ConfigSolver {
         int nz = 0;
         for (int k = 0; k < Kp(); ++k) nz += p.x[k] > 0;
         const double s2 = sse(ys) / N;
-        const double bic = (s2 > 0 && std::isfinite(s2)) ? N * std::log(s2) + (na_ + nb_ + nk_ + nz) * std::log(N)
-                                                          : std::numeric_limits<double>::infinity();
+        const double bic = (s2 > 0 && std::isfinite(s2))
+                               ? N * std::log(s2) + (na_ + nb_ + nk_ + nz) * std::log(N)
+                               : std::numeric_limits<double>::infinity();
         if (bic < best_bic || !std::isfinite(best_bic)) {
           best_bic = bic;
           cw = p.x;
@@ -409,7 +413,8 @@ Split split_of(std::size_t N, const FitOptions& opt) {
   if (opt.validation_start > 0) {
     s.end = std::min(opt.validation_start, N);
   } else if (opt.validation_fraction > 0) {
-    s.end = static_cast<std::size_t>(std::llround(static_cast<double>(N) * (1.0 - opt.validation_fraction)));
+    s.end = static_cast<std::size_t>(
+        std::llround(static_cast<double>(N) * (1.0 - opt.validation_fraction)));
   }
   return s;
 }
@@ -437,7 +442,8 @@ Candidate fit_on_design(const RelayDesign& design, const OutputSums& sums,
                         const Structure& s, const FitOptions& opt, std::vector<int>& warm,
                         const Eigen::VectorXd* b_start) {
   const bool identity = opt.block == LinearBlock::Identity;
-  ConfigSolver solver(design, sums, y, identity ? 0 : s.na, identity ? 1 : s.nb, s.nk, identity, opt);
+  ConfigSolver solver(design, sums, y, identity ? 0 : s.na, identity ? 1 : s.nb, s.nk, identity,
+                      opt);
   Candidate cand;
   cand.info.structure = s;
   int iters = 0;
@@ -538,7 +544,8 @@ std::string validate(const FitOptions& o) {
   if (o.nk_min < 0 || o.nk_max < o.nk_min) return "nk range must satisfy 0 <= nk_min <= nk_max";
   if (o.L_min < 1 || o.L_max < o.L_min) return "L range must satisfy 1 <= L_min <= L_max";
   if (o.L_max > 60) return "L above 60 (1,830 relays) is not supported";
-  if (o.na_max > 20 || o.nb_max > 20 || o.nk_max > 200) return "orders too large (na, nb <= 20, nk <= 200)";
+  if (o.na_max > 20 || o.nb_max > 20 || o.nk_max > 200)
+    return "orders too large (na, nb <= 20, nk <= 200)";
   if (o.kappas.empty()) return "kappa list must not be empty";
   for (double k : o.kappas)
     if (!(k > 0 && k <= 1)) return "kappa values must lie in (0, 1]";
@@ -564,7 +571,8 @@ ConfigurationResult fit_configuration(const std::vector<double>& u, const std::v
                                       HammersteinModel* model_out) {
   const Split sp = split_of(u.size(), opt);
   const RelayDesign design(grid_for(u, opt, s.L), u, y, {0}, design_options(opt, sp));
-  const OutputSums sums = output_sums(y, sp.t0, sp.end, opt.block == LinearBlock::Identity ? 0 : opt.na_max);
+  const OutputSums sums =
+      output_sums(y, sp.t0, sp.end, opt.block == LinearBlock::Identity ? 0 : opt.na_max);
   std::vector<int> warm;
   Candidate c = fit_on_design(design, sums, u, y, sp, s, opt, warm, nullptr);
   if (model_out) *model_out = c.model;
@@ -581,11 +589,13 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
   }
   if (u.size() < minimum_samples(opt) ||
       (opt.validation_start > 0 && opt.validation_start < minimum_samples(opt))) {
-    throw std::invalid_argument("too few samples: " + std::to_string(u.size()) + ", the model needs at least " +
+    throw std::invalid_argument("too few samples: " + std::to_string(u.size()) +
+                                ", the model needs at least " +
                                 std::to_string(minimum_samples(opt)));
   }
   for (std::size_t t = 0; t < u.size(); ++t)
-    if (!std::isfinite(u[t]) || !std::isfinite(y[t])) throw std::invalid_argument("non-finite sample");
+    if (!std::isfinite(u[t]) || !std::isfinite(y[t]))
+      throw std::invalid_argument("non-finite sample");
   const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
   if (!(*hi > *lo)) throw std::invalid_argument("the input is constant: nothing to identify");
 
@@ -597,7 +607,8 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
   // Work per L, largest first (they cost most), shared out over the cores.
   std::vector<int> Ls;
   for (int L = opt.L_max; L >= opt.L_min; --L) Ls.push_back(L);
-  unsigned nthreads = opt.threads > 0 ? static_cast<unsigned>(opt.threads) : std::max(1u, std::thread::hardware_concurrency());
+  unsigned nthreads = opt.threads > 0 ? static_cast<unsigned>(opt.threads)
+                                      : std::max(1u, std::thread::hardware_concurrency());
   nthreads = std::min<unsigned>(nthreads, static_cast<unsigned>(Ls.size()));
   std::atomic<std::size_t> next{0};
   std::mutex mtx;
@@ -631,8 +642,10 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
                 b0.head(prev_b.size()) = prev_b;
                 bs = &b0;
               }
-              Candidate c = fit_on_design(design, sums, u, y, sp, Structure{na, nb, nk, L}, opt, warm, bs);
-              prev_b = Eigen::Map<const Eigen::VectorXd>(c.model.b.data(), static_cast<Eigen::Index>(c.model.b.size()));
+              Candidate c =
+                  fit_on_design(design, sums, u, y, sp, Structure{na, nb, nk, L}, opt, warm, bs);
+              prev_b = Eigen::Map<const Eigen::VectorXd>(
+                  c.model.b.data(), static_cast<Eigen::Index>(c.model.b.size()));
               if (nb < nbmin) continue;
               const double sc = score(c.info, opt);
               if (opt.keep_all_configurations) local.push_back(c.info);
@@ -674,7 +687,8 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
     for (const auto& c : res.configurations) {
       if (!(score(c, opt) >= best_score - opt.parsimony_percent)) continue;
       auto key = [](const ConfigurationResult& r) {
-        return std::make_tuple(r.structure.na + r.structure.nb, r.structure.L, r.structure.nk, r.structure.na);
+        return std::make_tuple(r.structure.na + r.structure.nb, r.structure.L, r.structure.nk,
+                               r.structure.na);
       };
       if (!pick || key(c) < key(*pick)) pick = &c;
     }
@@ -690,7 +704,8 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
     res.status = IdentificationStatus::NoStableModel;
     res.fitness_percent = kNaN;
     res.validation_fitness_percent = kNaN;
-    res.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    res.elapsed_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
     return res;
   }
 
@@ -701,8 +716,8 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
     const auto histories = initial_histories(g, u[0]);
     std::vector<Candidate> found(histories.size());
     std::atomic<std::size_t> next_h{0};
-    const Eigen::VectorXd b0 =
-        Eigen::Map<const Eigen::VectorXd>(best.model.b.data(), static_cast<Eigen::Index>(best.model.b.size()));
+    const Eigen::VectorXd b0 = Eigen::Map<const Eigen::VectorXd>(
+        best.model.b.data(), static_cast<Eigen::Index>(best.model.b.size()));
     Structure s0 = best.info.structure;
     if (identity) s0 = Structure{0, 1, 0, s0.L};
     // Candidates are independent: share them out over the cores like the grid.

@@ -97,7 +97,8 @@ PreisachWeights he_stiction_weights(const PreisachGrid& grid, double fs, double 
     if (alpha > grid.umax) break;
     const double beta = alpha - (fs + fd);
     // Up threshold (u_j + u_{j+1})/2 = umin + (j - 1/2) delta matched to alpha, likewise beta.
-    const int jj = std::clamp(static_cast<int>(std::lround((alpha - grid.umin) / d + 0.5)), 1, grid.L);
+    const int jj =
+        std::clamp(static_cast<int>(std::lround((alpha - grid.umin) / d + 0.5)), 1, grid.L);
     const int ii = std::clamp(static_cast<int>(std::lround((beta - grid.umin) / d + 0.5)), 1, jj);
     w.mu[static_cast<std::size_t>(grid.relay_index(ii, jj))] += (fs - fd) / 2;
     total += (fs - fd) / 2;

@@ -70,7 +70,8 @@ RelayDesign::RelayDesign(const PreisachGrid& grid, const std::vector<double>& u,
     std::vector<std::int8_t> col(static_cast<std::size_t>(D));
     bool varies = false;
     for (int s = 0; s < D; ++s) {
-      col[static_cast<std::size_t>(s)] = rows[static_cast<std::size_t>(s)][static_cast<std::size_t>(k)];
+      col[static_cast<std::size_t>(s)] =
+          rows[static_cast<std::size_t>(s)][static_cast<std::size_t>(k)];
       if (col[static_cast<std::size_t>(s)] != col[0]) varies = true;
     }
     if (!varies) continue;
@@ -91,25 +92,29 @@ RelayDesign::RelayDesign(const PreisachGrid& grid, const std::vector<double>& u,
   gamma_.resize(D, Kp);
   for (int s = 0; s < D; ++s)
     for (int c = 0; c < Kp; ++c)
-      gamma_(s, c) = rows[static_cast<std::size_t>(s)][static_cast<std::size_t>(representative[static_cast<std::size_t>(c)])];
+      gamma_(s, c) = rows[static_cast<std::size_t>(s)]
+                         [static_cast<std::size_t>(representative[static_cast<std::size_t>(c)])];
 
   // State-space sums over the equation window, then relay space.
   const int dmax = opt.max_lag;
   const int na = opt.max_na;
   n_.assign(static_cast<std::size_t>(dmax + 1), Eigen::VectorXd::Zero(D));
-  h_.assign(static_cast<std::size_t>(dmax + 1),
-            std::vector<Eigen::VectorXd>(static_cast<std::size_t>(na + 1), Eigen::VectorXd::Zero(D)));
+  h_.assign(
+      static_cast<std::size_t>(dmax + 1),
+      std::vector<Eigen::VectorXd>(static_cast<std::size_t>(na + 1), Eigen::VectorXd::Zero(D)));
   for (int d = 0; d <= dmax; ++d) {
     auto& nd = n_[static_cast<std::size_t>(d)];
     auto& hd = h_[static_cast<std::size_t>(d)];
     for (std::size_t t = start_; t < end_; ++t) {
       const int s = state_[t - static_cast<std::size_t>(d)];
       nd[s] += 1.0;
-      for (int i = 0; i <= na; ++i) hd[static_cast<std::size_t>(i)][s] += y[t - static_cast<std::size_t>(i)];
+      for (int i = 0; i <= na; ++i)
+        hd[static_cast<std::size_t>(i)][s] += y[t - static_cast<std::size_t>(i)];
     }
   }
   g_.assign(static_cast<std::size_t>(dmax + 1), Eigen::VectorXd());
-  r_.assign(static_cast<std::size_t>(dmax + 1), std::vector<Eigen::VectorXd>(static_cast<std::size_t>(na + 1)));
+  r_.assign(static_cast<std::size_t>(dmax + 1),
+            std::vector<Eigen::VectorXd>(static_cast<std::size_t>(na + 1)));
   for (int d = 0; d <= dmax; ++d) {
     g_[static_cast<std::size_t>(d)] = gamma_.transpose() * n_[static_cast<std::size_t>(d)];
     for (int i = 0; i <= na; ++i)

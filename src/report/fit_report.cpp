@@ -6,7 +6,9 @@
 
 namespace valvediag {
 
-const char* method_name(FitMethod m) { return m == FitMethod::Joint ? "joint" : "alternation"; }
+const char* method_name(FitMethod m) {
+  return m == FitMethod::Joint ? "joint" : "alternation";
+}
 
 FitSeries fit_series(const IdentificationResult& r, const std::vector<double>& u,
                      const std::vector<double>& y) {
@@ -42,7 +44,9 @@ std::string polynomial(const std::vector<double>& coef, int first_power, bool le
   return s.str();
 }
 
-nlohmann::json number_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
+nlohmann::json number_or_null(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+}
 
 }  // namespace
 
@@ -50,40 +54,49 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
   std::ostringstream o;
   const auto& m = r.model;
   const auto& s = r.best.structure;
-  o << "data:      " << ctx.data_name << " (" << ctx.samples << " samples, Ts " << num(ctx.sample_period, 3)
-    << " s, OP " << num(m.grid.umin, 2) << " .. " << num(m.grid.umax, 2) << ")\n";
+  o << "data:      " << ctx.data_name << " (" << ctx.samples << " samples, Ts "
+    << num(ctx.sample_period, 3) << " s, OP " << num(m.grid.umin, 2) << " .. "
+    << num(m.grid.umax, 2) << ")\n";
   if (r.status == IdentificationStatus::NoStableModel) {
-    o << "result:    no stable model in the grid: every fitted linear block had a pole on or outside the\n"
-         "           unit circle (drift in the data?). Try --nk-max/--na-max, detrend, or --output mv.\n";
+    o << "result:    no stable model in the grid: every fitted linear block had a pole on or "
+         "outside the\n"
+         "           unit circle (drift in the data?). Try --nk-max/--na-max, detrend, or --output "
+         "mv.\n";
     return o.str();
   }
   if (m.block == LinearBlock::Identity) {
-    o << "model:     Preisach valve (L = " << s.L << ") fitted to the measured valve position (identity block)\n";
+    o << "model:     Preisach valve (L = " << s.L
+      << ") fitted to the measured valve position (identity block)\n";
   } else {
-    o << "model:     Preisach valve (L = " << s.L << ") -> ARX (na = " << s.na << ", nb = " << s.nb << ", nk = " << s.nk
-      << ")   [" << ctx.method << " method]\n";
+    o << "model:     Preisach valve (L = " << s.L << ") -> ARX (na = " << s.na << ", nb = " << s.nb
+      << ", nk = " << s.nk << ")   [" << ctx.method << " method]\n";
     o << "           A(q) = " << polynomial(m.a, 1, true) << "\n";
-    o << "           B(q) = " << polynomial(m.b, s.nk + 1, false) << "   (||b|| = 1, gain sign in b)\n";
+    o << "           B(q) = " << polynomial(m.b, s.nk + 1, false)
+      << "   (||b|| = 1, gain sign in b)\n";
   }
   o << "           c = " << num(m.c) << "\n";
-  o << "fitness:   " << num(r.fitness_percent, 2) << " % on estimation data (simulated output, eq 20)";
+  o << "fitness:   " << num(r.fitness_percent, 2)
+    << " % on estimation data (simulated output, eq 20)";
   if (std::isfinite(r.validation_fitness_percent))
     o << ", " << num(r.validation_fitness_percent, 2) << " % on validation data";
   o << "\n";
   int nz = 0;
   for (double w : m.mu) nz += w > 0;
-  o << "valve:     " << nz << " nonzero weights of " << m.grid.relay_count() << " relays (kappa " << num(r.best.kappa, 2)
-    << ", BIC " << num(r.best.bic, 1) << ")\n";
+  o << "valve:     " << nz << " nonzero weights of " << m.grid.relay_count() << " relays (kappa "
+    << num(r.best.kappa, 2) << ", BIC " << num(r.best.bic, 1) << ")\n";
   o << "memory:    initial relay state ";
   if (m.initial_history.size() <= 1) {
     o << "as if OP came up from its minimum\n";
   } else {
-    o << "estimated: OP was at level " << m.initial_history[0] << " then " << m.initial_history[1] << " of " << m.grid.L
-      << " before the record (+" << num(r.initial_memory_gain_percent, 2) << " fitness points)\n";
+    o << "estimated: OP was at level " << m.initial_history[0] << " then " << m.initial_history[1]
+      << " of " << m.grid.L << " before the record (+" << num(r.initial_memory_gain_percent, 2)
+      << " fitness points)\n";
   }
-  o << "identifiability: " << to_string(r.identifiability.kind) << ": " << r.identifiability.summary << "\n";
-  o << "solver:    " << to_string(r.best.status) << " (" << r.best.stop_reason << "); " << r.configurations.size()
-    << " configurations, " << r.total_iterations << " solver iterations, " << num(r.elapsed_s, 3) << " s\n";
+  o << "identifiability: " << to_string(r.identifiability.kind) << ": " << r.identifiability.summary
+    << "\n";
+  o << "solver:    " << to_string(r.best.status) << " (" << r.best.stop_reason << "); "
+    << r.configurations.size() << " configurations, " << r.total_iterations
+    << " solver iterations, " << num(r.elapsed_s, 3) << " s\n";
   return o.str();
 }
 
@@ -92,15 +105,20 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
   const auto& m = r.model;
   const auto& s = r.best.structure;
   json j;
-  j["data"] = {{"source", ctx.data_name}, {"samples", ctx.samples}, {"sample_period_s", ctx.sample_period},
-               {"output", ctx.output_name}, {"estimation_samples", r.estimation_end},
+  j["data"] = {{"source", ctx.data_name},
+               {"samples", ctx.samples},
+               {"sample_period_s", ctx.sample_period},
+               {"output", ctx.output_name},
+               {"estimation_samples", r.estimation_end},
                {"first_simulated_sample", r.first_sample}};
   j["status"] = r.status == IdentificationStatus::Ok ? "ok" : "no-stable-model";
-  j["model"] = m.block == LinearBlock::Identity ? "preisach (identity linear block)" : "preisach-hammerstein";
+  j["model"] = m.block == LinearBlock::Identity ? "preisach (identity linear block)"
+                                                : "preisach-hammerstein";
   j["method"] = ctx.method;
   j["structure"] = {{"na", s.na}, {"nb", s.nb}, {"nk", s.nk}, {"L", s.L}};
   j["fitness_percent"] = number_or_null(r.fitness_percent);
-  if (r.estimation_end < ctx.samples) j["validation_fitness_percent"] = number_or_null(r.validation_fitness_percent);
+  if (r.estimation_end < ctx.samples)
+    j["validation_fitness_percent"] = number_or_null(r.validation_fitness_percent);
   j["a"] = m.a;
   j["b"] = m.b;
   j["c"] = m.c;
@@ -111,12 +129,17 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
       const double w = m.mu.empty() ? 0.0 : m.mu[static_cast<std::size_t>(g.relay_index(i, jj))];
       if (w <= 0) continue;
       // Relay (i, j) switches down below (u_i + u_{i+1})/2 and up above (u_j + u_{j+1})/2.
-      mu.push_back({{"i", i}, {"j", jj}, {"weight", w},
+      mu.push_back({{"i", i},
+                    {"j", jj},
+                    {"weight", w},
                     {"down_threshold", g.threshold(i) + g.delta() / 2},
                     {"up_threshold", g.threshold(jj) + g.delta() / 2}});
     }
   j["mu"] = mu;
-  j["preisach"] = {{"umin", g.umin}, {"umax", g.umax}, {"L", g.L}, {"relays", g.relay_count()},
+  j["preisach"] = {{"umin", g.umin},
+                   {"umax", g.umax},
+                   {"L", g.L},
+                   {"relays", g.relay_count()},
                    {"initial_history_levels", m.initial_history},
                    {"initial_memory_gain_percent", r.initial_memory_gain_percent}};
   const auto& id = r.identifiability;
@@ -128,9 +151,12 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
                           {"reversals", id.reversals},
                           {"threshold_coverage", id.threshold_coverage},
                           {"summary", id.summary}};
-  j["solver"] = {{"status", to_string(r.best.status)}, {"stop_reason", r.best.stop_reason},
-                 {"kappa", r.best.kappa}, {"bic", number_or_null(r.best.bic)},
-                 {"stable", r.best.stable}, {"configurations", r.configurations.size()}};
+  j["solver"] = {{"status", to_string(r.best.status)},
+                 {"stop_reason", r.best.stop_reason},
+                 {"kappa", r.best.kappa},
+                 {"bic", number_or_null(r.best.bic)},
+                 {"stable", r.best.stable},
+                 {"configurations", r.configurations.size()}};
   j["iterations"] = r.total_iterations;
   j["elapsed_s"] = r.elapsed_s;
   return j;

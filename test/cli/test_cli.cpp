@@ -28,7 +28,9 @@ Run run(const std::string& args) {
   return r;
 }
 
-std::string tmp(const std::string& name) { return std::string(VALVEDIAG_TMP) + "/" + name; }
+std::string tmp(const std::string& name) {
+  return std::string(VALVEDIAG_TMP) + "/" + name;
+}
 
 void write(const std::string& path, const std::string& text) {
   std::ofstream f(path);
@@ -41,7 +43,9 @@ std::string loop_csv(std::size_t n, bool constant_op = false) {
   s << "t,op,pv\n";
   double x = 50, y = 0;
   for (std::size_t k = 0; k < n; ++k) {
-    const double u = constant_op ? 50.0 : 50 + 10 * std::sin(0.02 * static_cast<double>(k)) + 3 * std::sin(0.13 * static_cast<double>(k));
+    const double u = constant_op ? 50.0
+                                 : 50 + 10 * std::sin(0.02 * static_cast<double>(k)) +
+                                       3 * std::sin(0.13 * static_cast<double>(k));
     if (std::abs(u - x) > 2.0) x = u;  // a valve that sticks 2 %
     y = 0.9 * y + 0.1 * (x - 50);
     s << k * 0.5 << "," << u << "," << y << "\n";
@@ -125,8 +129,8 @@ TEST_CASE("fit writes the JSON keys and the series others rely on") {
   CHECK(r.out.find("fitness:") != std::string::npos);
   std::ifstream f(tmp("fit.json"));
   const auto j = nlohmann::json::parse(f);
-  for (const char* k : {"model", "structure", "fitness_percent", "validation_fitness_percent", "a", "b", "c", "mu",
-                        "identifiability", "iterations", "elapsed_s"})
+  for (const char* k : {"model", "structure", "fitness_percent", "validation_fitness_percent", "a",
+                        "b", "c", "mu", "identifiability", "iterations", "elapsed_s"})
     CHECK_MESSAGE(j.contains(k), k);
   for (const char* k : {"na", "nb", "nk", "L"}) CHECK(j["structure"].contains(k));
   CHECK(j["fitness_percent"].get<double>() > 80.0);

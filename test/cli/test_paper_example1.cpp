@@ -13,8 +13,8 @@ TEST_CASE("paper Example 1: fitness at least 94 % over the full grid") {
   const auto r = identify(d.op, d.pv, FitOptions{});
   const auto& s = r.best.structure;
   std::printf("Example 1   paper: (na, nb, nk, L) = (1, 1, 5, 16), fitness 94.69 %%\n");
-  std::printf("Example 1   ours:  (na, nb, nk, L) = (%d, %d, %d, %d), fitness %.2f %% in %.2f s\n", s.na, s.nb, s.nk,
-              s.L, r.fitness_percent, r.elapsed_s);
+  std::printf("Example 1   ours:  (na, nb, nk, L) = (%d, %d, %d, %d), fitness %.2f %% in %.2f s\n",
+              s.na, s.nb, s.nk, s.L, r.fitness_percent, r.elapsed_s);
   REQUIRE(r.status == IdentificationStatus::Ok);
   CHECK(r.fitness_percent >= 94.0);
   for (double w : r.model.mu) CHECK(w >= 0.0);
@@ -34,8 +34,11 @@ TEST_CASE("paper Example 1 at the paper's structure: joint solve vs the paper's 
   const auto rj = fit_configuration(d.op, d.pv, st, joint);
   const auto rp = fit_configuration(d.op, d.pv, st, paper);
   const auto rc = fit_configuration(d.op, d.pv, st, creep);
-  std::printf("(1,1,5,16) joint: %.2f %% (%d it)  paper rule: %.2f %% (%d it)  alternation to cost stop: %.2f %% (%d it)\n",
-              rj.fitness_percent, rj.iterations, rp.fitness_percent, rp.iterations, rc.fitness_percent, rc.iterations);
+  std::printf(
+      "(1,1,5,16) joint: %.2f %% (%d it)  paper rule: %.2f %% (%d it)  alternation to cost stop: "
+      "%.2f %% (%d it)\n",
+      rj.fitness_percent, rj.iterations, rp.fitness_percent, rp.iterations, rc.fitness_percent,
+      rc.iterations);
   CHECK(rj.fitness_percent >= rp.fitness_percent - 0.5);
   CHECK(rj.cost <= rc.cost * (1 + 1e-3));
   CHECK(rj.iterations < rc.iterations);

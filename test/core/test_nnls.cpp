@@ -60,7 +60,8 @@ TEST_CASE("NNLS matches brute force on small problems") {
       Eigen::VectorXd b(k);
       for (Eigen::Index a = 0; a < k; ++a) {
         b[a] = p.f[idx[static_cast<std::size_t>(a)]];
-        for (Eigen::Index c = 0; c < k; ++c) A(a, c) = p.H(idx[static_cast<std::size_t>(a)], idx[static_cast<std::size_t>(c)]);
+        for (Eigen::Index c = 0; c < k; ++c)
+          A(a, c) = p.H(idx[static_cast<std::size_t>(a)], idx[static_cast<std::size_t>(c)]);
       }
       Eigen::VectorXd z = A.ldlt().solve(b);
       if (z.minCoeff() < 0) continue;
@@ -110,7 +111,8 @@ TEST_CASE("budget: inactive leaves the solution, active meets it exactly with KK
     }
     // Tighter budgets never lower the objective's minimum.
     for (int k = 1; k < 5; ++k)
-      CHECK(qp.objective(path[static_cast<std::size_t>(k)].x) >= qp.objective(path[static_cast<std::size_t>(k - 1)].x) - 1e-9);
+      CHECK(qp.objective(path[static_cast<std::size_t>(k)].x) >=
+            qp.objective(path[static_cast<std::size_t>(k - 1)].x) - 1e-9);
   }
 }
 
