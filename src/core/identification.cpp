@@ -22,6 +22,7 @@ struct OutputSums {
   Eigen::MatrixXd yy;  // sum y(t-i) y(t-j), i, j = 0..na_max
   Eigen::VectorXd y;   // sum y(t-i)
   double count = 0;
+  double spread = 0;  // sum (y - mean)^2 on the window: eq 20's denominator
 };
 
 OutputSums output_sums(const std::vector<double>& y, std::size_t from, std::size_t to, int na) {
@@ -37,6 +38,8 @@ OutputSums output_sums(const std::vector<double>& y, std::size_t from, std::size
   }
   s.yy = s.yy.selfadjointView<Eigen::Upper>();
   s.count = static_cast<double>(to - from);
+  const double mean = s.y[0] / s.count;
+  for (std::size_t t = from; t < to; ++t) s.spread += (y[t] - mean) * (y[t] - mean);
   return s;
 }
 
@@ -124,28 +127,50 @@ class ConfigSolver {
     return true;
   }
 
-  // Simulated output on the estimation window from column weights (fast path through states).
-  std::vector<double> simulate(const Eigen::VectorXd& a, const Eigen::VectorXd& b, double c,
-                               const Eigen::VectorXd& cw) const {
+  // Sum of squared simulated-output errors on the estimation window (eq 20's numerator), from
+  // column weights through the state index: one gather per sample, then the ARX recursion.
+  // This runs once per configuration and dominates at large N, so it is kept tight.
+  double simulated_sse(const Eigen::VectorXd& a, const Eigen::VectorXd& b, double c,
+                       const Eigen::VectorXd& cw) const {
     const Eigen::VectorXd w = D_.gamma() * cw;
     const auto& st = D_.state_of_sample();
     const std::size_t t0 = D_.start(), N = D_.end();
-    std::vector<double> ys(N);
+    thread_local std::vector<double> xs, ys;
+    xs.resize(N);
+    ys.resize(N);
+    for (std::size_t t = 0; t < N; ++t) xs[t] = w[st[t]];
     for (std::size_t t = 0; t < t0; ++t) ys[t] = y_[t];
-    for (std::size_t t = t0; t < N; ++t) {
-      double v = c;
-      for (int i = 0; i < na_; ++i) v -= a[i] * ys[t - static_cast<std::size_t>(i + 1)];
-      for (int k = 0; k < nb_; ++k)
-        v += b[k] * w[st[t - static_cast<std::size_t>(lags_[static_cast<std::size_t>(k)])]];
-      ys[t] = v;
-    }
-    return ys;
+    if (na_ == 1 && nb_ == 1) return recursion<1, 1>(a, b, c, xs, ys);
+    if (na_ == 1 && nb_ == 2) return recursion<1, 2>(a, b, c, xs, ys);
+    if (na_ == 1 && nb_ == 3) return recursion<1, 3>(a, b, c, xs, ys);
+    if (na_ == 2 && nb_ == 1) return recursion<2, 1>(a, b, c, xs, ys);
+    if (na_ == 2 && nb_ == 2) return recursion<2, 2>(a, b, c, xs, ys);
+    if (na_ == 2 && nb_ == 3) return recursion<2, 3>(a, b, c, xs, ys);
+    if (na_ == 3 && nb_ == 1) return recursion<3, 1>(a, b, c, xs, ys);
+    if (na_ == 3 && nb_ == 2) return recursion<3, 2>(a, b, c, xs, ys);
+    if (na_ == 3 && nb_ == 3) return recursion<3, 3>(a, b, c, xs, ys);
+    return recursion<-1, -1>(a, b, c, xs, ys);
   }
 
-  double sse(const std::vector<double>& ys) const {
-    double s = 0.0;
-    for (std::size_t t = D_.start(); t < D_.end(); ++t) s += (ys[t] - y_[t]) * (ys[t] - y_[t]);
-    return s;
+  template <int NA, int NB>
+  double recursion(const Eigen::VectorXd& a, const Eigen::VectorXd& b, double c,
+                   const std::vector<double>& xs, std::vector<double>& ys) const {
+    const int na = NA >= 0 ? NA : na_, nb = NB >= 0 ? NB : nb_;
+    const std::size_t t0 = D_.start(), N = D_.end();
+    const std::size_t d0 = static_cast<std::size_t>(lags_[0]);
+    double sse = 0.0;
+    const double* y = y_.data();
+    const double* x = xs.data();
+    double* o = ys.data();
+    for (std::size_t t = t0; t < N; ++t) {
+      double v = c;
+      for (int i = 0; i < na; ++i) v -= a[i] * o[t - static_cast<std::size_t>(i + 1)];
+      for (int k = 0; k < nb; ++k) v += b[k] * x[t - d0 - static_cast<std::size_t>(k)];
+      o[t] = v;
+      const double e = v - y[t];
+      sse += e * e;
+    }
+    return std::isfinite(sse) ? sse : std::numeric_limits<double>::infinity();
   }
 
   struct Theta {
@@ -181,7 +206,7 @@ class ConfigSolver {
 
   // The BIC choice of the L1 budget (eqs 21-22) for the final b, on the exact homotopy path.
   Theta choose_budget(const Theta& unbudgeted, double& kappa_out, double& bic_out, int& nz_out,
-                      std::vector<double>& ys_out) const {
+                      double& sse_out) const {
     Eigen::MatrixXd H;
     Eigen::VectorXd f;
     joint_system(unbudgeted.b, H, f);
@@ -207,11 +232,11 @@ class ConfigSolver {
       th.b = unbudgeted.b;
       th.status = path[i].status;
       th.cost = S_.yy(0, 0) + 2.0 * qp.objective(path[i].x);
-      std::vector<double> ys;
+      double sse = -1.0;
       double sigma2 = std::max(th.cost, 0.0) / N;
       if (opt_.bic_on_simulated_output) {
-        ys = simulate(th.a, th.b, th.c, th.cw);
-        sigma2 = sse(ys) / N;
+        sse = simulated_sse(th.a, th.b, th.c, th.cw);
+        sigma2 = sse / N;
       }
       int nz = 0;
       for (int k = 0; k < Kp(); ++k) nz += th.cw[k] > 0;
@@ -224,11 +249,11 @@ class ConfigSolver {
         best = th;
         kappa_out = kappas[i];
         nz_out = nz;
-        ys_out = std::move(ys);
+        sse_out = sse;
       }
     }
     bic_out = best_bic;
-    if (ys_out.empty()) ys_out = simulate(best.a, best.b, best.c, best.cw);
+    if (sse_out < 0) sse_out = simulated_sse(best.a, best.b, best.c, best.cw);
     return best;
   }
 
@@ -300,10 +325,9 @@ class ConfigSolver {
       std::sort(ks.begin(), ks.end(), std::greater<>());
       const double N = static_cast<double>(D_.end() - D_.start());
       for (const auto& p : path) {
-        const auto ys = simulate(a, b, c, p.x);
         int nz = 0;
         for (int k = 0; k < Kp(); ++k) nz += p.x[k] > 0;
-        const double s2 = sse(ys) / N;
+        const double s2 = simulated_sse(a, b, c, p.x) / N;
         const double bic = (s2 > 0 && std::isfinite(s2))
                                ? N * std::log(s2) + (na_ + nb_ + nk_ + nz) * std::log(N)
                                : std::numeric_limits<double>::infinity();
@@ -482,14 +506,14 @@ Candidate fit_on_design(const RelayDesign& design, const OutputSums& sums,
   }
   double kappa = 1.0, bic = 0.0;
   int nz = 0;
-  std::vector<double> ys;
+  double sse = -1.0;
   if (opt.method == FitMethod::Joint || identity) {
-    th = solver.choose_budget(th, kappa, bic, nz, ys);
+    th = solver.choose_budget(th, kappa, bic, nz, sse);
   } else {
-    ys = solver.simulate(th.a, th.b, th.c, th.cw);
+    sse = solver.simulated_sse(th.a, th.b, th.c, th.cw);
     const double N = static_cast<double>(sp.end - sp.t0);
     for (int k = 0; k < th.cw.size(); ++k) nz += th.cw[k] > 0;
-    bic = N * std::log(solver.sse(ys) / N) + (s.na + s.nb + s.nk + nz) * std::log(N);
+    bic = N * std::log(sse / N) + (s.na + s.nb + s.nk + nz) * std::log(N);
   }
   HammersteinModel& m = cand.model;
   m.structure = identity ? Structure{0, 1, 0, s.L} : s;
@@ -511,7 +535,9 @@ Candidate fit_on_design(const RelayDesign& design, const OutputSums& sums,
   info.status = th.status;
   info.stop_reason = stop;
   info.stable = identity || is_stable(m.a);
-  info.fitness_percent = info.stable ? fitness_percent(y, ys, sp.t0, sp.end) : kNaN;
+  info.fitness_percent = info.stable && sums.spread > 0 && std::isfinite(sse)
+                             ? (1.0 - std::sqrt(sse / sums.spread)) * 100.0
+                             : kNaN;
   info.validation_fitness_percent = kNaN;
   if (info.stable && sp.end < sp.N) {
     const auto full = simulate_output(m, u, y, sp.t0);
