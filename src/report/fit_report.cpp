@@ -94,9 +94,11 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
   }
   o << "identifiability: " << to_string(r.identifiability.kind) << ": " << r.identifiability.summary
     << "\n";
+  int unstable = 0;
+  for (const auto& c : r.configurations) unstable += !c.stable;
   o << "solver:    " << to_string(r.best.status) << " (" << r.best.stop_reason << "); "
-    << r.configurations.size() << " configurations, " << r.total_iterations
-    << " solver iterations, " << num(r.elapsed_s, 3) << " s\n";
+    << r.configurations.size() << " configurations (" << unstable << " rejected as unstable), "
+    << r.total_iterations << " solver iterations, " << num(r.elapsed_s, 3) << " s\n";
   return o.str();
 }
 
@@ -151,6 +153,9 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
                           {"reversals", id.reversals},
                           {"threshold_coverage", id.threshold_coverage},
                           {"summary", id.summary}};
+  int unstable = 0;
+  for (const auto& c : r.configurations) unstable += !c.stable;
+  j["rejected_unstable"] = unstable;
   j["solver"] = {{"status", to_string(r.best.status)},
                  {"stop_reason", r.best.stop_reason},
                  {"kappa", r.best.kappa},
