@@ -8,6 +8,7 @@
 
 #include "valvediag/identification.hpp"
 #include "valvediag/loop_data.hpp"
+#include "valvediag/residual_analysis.hpp"
 
 namespace valvediag {
 
@@ -15,8 +16,10 @@ struct FitContext {
   std::string data_name;
   std::size_t samples = 0;
   double sample_period = 0.0;
-  std::string output_name = "pv";  // "pv" or "mv"
-  std::string method;              // "joint" or "alternation"
+  std::string output_name = "pv";              // "pv" or "mv"
+  std::string method;                          // "joint" or "alternation"
+  const std::vector<double>* time = nullptr;   // time stamps, s (for intervals)
+  const ResidualAnalysis* residual = nullptr;  // where the model fails (estimation window)
 };
 
 const char* method_name(FitMethod m);
@@ -27,6 +30,10 @@ struct FitSeries {
 };
 FitSeries fit_series(const IdentificationResult& r, const std::vector<double>& u,
                      const std::vector<double>& y);
+
+// Residual analysis of the fitted model on its estimation window.
+ResidualAnalysis analyse_fit(const IdentificationResult& r, const std::vector<double>& u,
+                             const std::vector<double>& y, const FitSeries& s);
 
 std::string format_summary(const IdentificationResult& r, const FitContext& ctx);
 nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx);

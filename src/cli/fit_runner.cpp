@@ -18,7 +18,14 @@ FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& outpu
   check_identifiable_data(checked, minimum_samples(fo), model);
   FitRun run;
   run.result = identify(d.op, checked.pv, fo);
+  ResidualAnalysis where;
   FitContext ctx;
+  if (run.result.status == IdentificationStatus::Ok) {
+    const FitSeries series = fit_series(run.result, d.op, checked.pv);
+    where = analyse_fit(run.result, d.op, checked.pv, series);
+    ctx.residual = &where;
+  }
+  ctx.time = &d.t;
   ctx.data_name = d.source;
   ctx.samples = d.size();
   ctx.sample_period = d.sample_period();

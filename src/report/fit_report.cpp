@@ -1,5 +1,6 @@
 #include "valvediag/fit_report.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -18,6 +19,15 @@ FitSeries fit_series(const IdentificationResult& r, const std::vector<double>& u
   s.residual.resize(y.size());
   for (std::size_t t = 0; t < y.size(); ++t) s.residual[t] = y[t] - s.y_sim[t];
   return s;
+}
+
+ResidualAnalysis analyse_fit(const IdentificationResult& r, const std::vector<double>& u,
+                             const std::vector<double>& y, const FitSeries& s) {
+  ResidualAnalysisOptions o;
+  o.model_delay = r.model.block == LinearBlock::Identity
+                      ? 0
+                      : static_cast<std::size_t>(r.model.structure.nk + 1);
+  return analyse_residual(u, y, s.y_sim, r.first_sample, r.estimation_end, o);
 }
 
 namespace {
@@ -46,6 +56,83 @@ std::string polynomial(const std::vector<double>& coef, int first_power, bool le
 
 nlohmann::json number_or_null(double v) {
   return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+}
+
+double time_of(const FitContext& ctx, std::size_t k) {
+  return ctx.time && k < ctx.time->size() ? (*ctx.time)[k]
+                                          : static_cast<double>(k) * ctx.sample_period;
+}
+
+// The regions worth naming: well above their share of the samples, and a real part of the error.
+std::vector<const ResidualRegion*> notable_regions(const ResidualAnalysis& a) {
+  std::vector<const ResidualRegion*> v;
+  for (const auto& g : a.regions)
+    if (g.excess >= 1.5 && g.share >= 0.1) v.push_back(&g);
+  std::sort(v.begin(), v.end(), [](auto* x, auto* y) { return x->excess > y->excess; });
+  if (v.size() > 4) v.resize(4);
+  return v;
+}
+
+std::string format_where(const ResidualAnalysis& a, const FitContext& ctx) {
+  std::ostringstream o;
+  o << "where it fails: residual RMS " << num(a.rms, 3) << ", white-noise level "
+    << num(a.noise_level, 3) << "\n";
+  std::size_t shown = 0;
+  for (const auto& iv : a.intervals) {
+    if (shown++ == 3) break;
+    o << "           t " << num(time_of(ctx, iv.begin), 1) << " .. "
+      << num(time_of(ctx, iv.end - 1), 1) << " s: " << num(100 * iv.share, 0)
+      << " % of the squared error (RMS " << num(iv.rms, 3) << ")\n";
+  }
+  for (const auto* g : notable_regions(a))
+    o << "           " << g->label << ": " << num(100 * g->share, 0) << " % of the error in "
+      << num(100 * g->share / g->excess, 0) << " % of the samples (mean residual "
+      << num(g->mean, 3) << ")\n";
+  for (const auto& t : a.tests)
+    if (t.score >= 0.3) {
+      o << "           " << t.name << " " << num(t.score, 2) << " -> ";
+      for (std::size_t i = 0; i < t.effects.size(); ++i) o << (i ? ", " : "") << t.effects[i];
+      o << ": " << t.detail << "\n";
+    }
+  return o.str();
+}
+
+nlohmann::json where_json(const ResidualAnalysis& a, const FitContext& ctx) {
+  using nlohmann::json;
+  json w;
+  w["residual_rms"] = a.rms;
+  w["noise_level"] = a.noise_level;
+  w["op_reversals"] = a.reversals;
+  json iv = json::array();
+  for (const auto& i : a.intervals)
+    iv.push_back({{"begin_sample", i.begin},
+                  {"end_sample", i.end},
+                  {"t_begin_s", time_of(ctx, i.begin)},
+                  {"t_end_s", time_of(ctx, i.end - 1)},
+                  {"rms", i.rms},
+                  {"share", i.share}});
+  w["intervals"] = iv;
+  json rg = json::array();
+  for (const auto& g : a.regions)
+    rg.push_back({{"kind", g.kind},
+                  {"label", g.label},
+                  {"lo", g.lo},
+                  {"hi", g.hi},
+                  {"samples", g.samples},
+                  {"rms", g.rms},
+                  {"mean", g.mean},
+                  {"share", g.share},
+                  {"excess", g.excess}});
+  w["regions"] = rg;
+  json ts = json::array();
+  for (const auto& t : a.tests)
+    ts.push_back({{"name", t.name},
+                  {"effects", t.effects},
+                  {"statistic", t.statistic},
+                  {"score", t.score},
+                  {"detail", t.detail}});
+  w["tests"] = ts;
+  return w;
 }
 
 }  // namespace
@@ -94,6 +181,7 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
   }
   o << "identifiability: " << to_string(r.identifiability.kind) << ": " << r.identifiability.summary
     << "\n";
+  if (ctx.residual) o << format_where(*ctx.residual, ctx);
   int unstable = 0;
   for (const auto& c : r.configurations) unstable += !c.stable;
   o << "solver:    " << to_string(r.best.status) << " (" << r.best.stop_reason << "); "
@@ -162,6 +250,7 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
                  {"bic", number_or_null(r.best.bic)},
                  {"stable", r.best.stable},
                  {"configurations", r.configurations.size()}};
+  if (ctx.residual) j["where"] = where_json(*ctx.residual, ctx);
   j["iterations"] = r.total_iterations;
   j["elapsed_s"] = r.elapsed_s;
   return j;
