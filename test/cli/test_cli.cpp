@@ -134,6 +134,14 @@ TEST_CASE("fit writes the JSON keys and the series others rely on") {
     CHECK_MESSAGE(j.contains(k), k);
   for (const char* k : {"na", "nb", "nk", "L"}) CHECK(j["structure"].contains(k));
   CHECK(j["fitness_percent"].get<double>() > 80.0);
+  // Where it fails: the residual analysis of the estimation window.
+  REQUIRE(j.contains("where"));
+  CHECK(j["where"]["residual_rms"].get<double>() > 0.0);
+  CHECK(j["where"]["tests"].size() == 9);
+  double share = 0;
+  for (const auto& g : j["where"]["regions"])
+    if (g["kind"] == "op-level") share += g["share"].get<double>();
+  CHECK(share == doctest::Approx(1.0).epsilon(1e-9));  // OP-level regions partition the error
   REQUIRE(!j["mu"].empty());
   for (const auto& w : j["mu"]) {
     CHECK(w["i"].get<int>() <= w["j"].get<int>());
