@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <iostream>
 
@@ -27,34 +28,50 @@ struct FitArgs {
   bool no_merge = false;
 };
 
-std::size_t validation_start(const LoopData& d, const std::string& spec, FitOptions& fo) {
-  // "0.3": last 30 % held out; "t=600" or "600s": samples from t >= 600 s held out.
-  std::string s = spec;
-  bool time = false;
-  if (s.rfind("t=", 0) == 0) {
-    s = s.substr(2);
-    time = true;
-  } else if (!s.empty() && s.back() == 's') {
-    s.pop_back();
-    time = true;
+// "0.3": the last 30 % held out; "t=600" or "600s": samples from t >= 600 s held out;
+// "600:900": samples with 600 <= t < 900 s held out and the data after 900 s left out.
+// Returns the first held-out sample (0 for a fraction, which goes into fo).
+std::size_t validation_start(LoopData& d, const std::string& spec, FitOptions& fo) {
+  auto number = [&](std::string s) {
+    if (s.rfind("t=", 0) == 0) s = s.substr(2);
+    if (!s.empty() && s.back() == 's') s.pop_back();
+    try {
+      std::size_t pos = 0;
+      const double v = std::stod(s, &pos);
+      if (pos == s.size() && std::isfinite(v)) return v;
+    } catch (const std::exception&) {
+    }
+    throw UsageError(
+        "--validate '" + spec +
+        "': give a fraction (0.3), a start time (t=600 or 600s) or a time range (600:900)");
+  };
+  auto index_at = [&](double seconds) {
+    const auto it = std::lower_bound(d.t.begin(), d.t.end(), d.t.front() + seconds);
+    return static_cast<std::size_t>(it - d.t.begin());
+  };
+  const auto colon = spec.find(':');
+  if (colon != std::string::npos) {
+    const double a = number(spec.substr(0, colon)), b = number(spec.substr(colon + 1));
+    const std::size_t ia = index_at(a), ib = index_at(b);
+    if (!(b > a) || ia == 0 || ia >= d.size() || ib <= ia)
+      throw UsageError("--validate " + spec +
+                       ": the range must lie inside the data's time range (0 .. " +
+                       std::to_string(d.t.back() - d.t.front()) + " s) and end after it starts");
+    auto cut = [&](std::vector<double>& v) {
+      if (!v.empty()) v.resize(ib);
+    };
+    for (auto* v : {&d.t, &d.op, &d.pv, &d.sp, &d.mv}) cut(*v);
+    return ia;
   }
-  double v = 0;
-  try {
-    std::size_t pos = 0;
-    v = std::stod(s, &pos);
-    if (pos != s.size()) throw std::invalid_argument("trailing");
-  } catch (const std::exception&) {
-    throw UsageError("--validate '" + spec +
-                     "': give a fraction (0.3) or a start time (t=600 or 600s)");
-  }
+  const bool time = spec.rfind("t=", 0) == 0 || (!spec.empty() && spec.back() == 's');
+  const double v = number(spec);
   if (!time) {
     if (!(v > 0 && v < 0.9))
       throw UsageError("--validate fraction must lie in (0, 0.9), got " + spec);
     fo.validation_fraction = v;
     return 0;
   }
-  const auto it = std::lower_bound(d.t.begin(), d.t.end(), d.t.front() + v);
-  const auto idx = static_cast<std::size_t>(it - d.t.begin());
+  const std::size_t idx = index_at(v);
   if (idx == 0 || idx >= d.size())
     throw UsageError("--validate " + spec + " lies outside the data's time range");
   return idx;
@@ -167,8 +184,9 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->add_option("--threads", a->fit.threads, "worker threads (0: all cores)")->group(g_m);
 
   auto* g_v = "Validation and output";
-  cmd->add_option("--validate", a->validate,
-                  "hold out the last fraction (0.3) or from a time on (t=600)")
+  cmd->add_option(
+         "--validate", a->validate,
+         "hold out the last fraction (0.3), from a time on (t=600) or a time range (600:900, s)")
       ->group(g_v);
   cmd->add_option("--select-on", a->select_on,
                   "choose the configuration on estimation or validation fitness")
