@@ -1,0 +1,132 @@
+// The pieces of the separable least-squares estimators (Jelali 2008, as the paper's baselines):
+// for given valve-effect parameters the valve position x = f(u) is simulated through the blocks of
+// valve_effects.hpp, the linear part is fitted by linear least squares over a small structure grid,
+// and each structure is scored by its simulated-output error (eq 20). model_fit.hpp searches the
+// valve parameters with NLopt around this.
+#pragma once
+
+#include <cstddef>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "valvediag/model_spec.hpp"
+#include "valvediag/valve_effects.hpp"
+
+namespace valvediag {
+
+// A(q^-1) y = B(q^-1) x + c,  B = b1 q^-(nk+1) + ... + b_nb q^-(nk+nb) (as in hammerstein.hpp).
+struct ArxStructure {
+  int na = 1, nb = 1, nk = 0;
+  bool operator==(const ArxStructure&) const = default;
+};
+
+struct StructureRange {
+  int na_min = 1, na_max = 2;
+  int nb_min = 1, nb_max = 2;
+  int nk_min = 0, nk_max = 10;
+};
+
+struct LinearOptions {
+  StructureRange range;
+  // `integrator`: A has a fixed (1 - q^-1) factor. The ARX part is fitted to the differenced
+  // output w = y(t) - y(t-1) and the simulation integrates it back; c is then a ramp rate.
+  bool integrating = false;
+  // `disturbance`: a slow unmeasured load d(t) in the equation, A y = B x + d + e, with d
+  // piecewise linear between knots every `drift_knot_spacing` samples over the estimation data
+  // (hat functions; they replace c). d passes through 1/A like a load entering the process.
+  // After the estimation data d holds its last value (so validation is honest).
+  bool drift = false;
+  std::size_t drift_knot_spacing = 0;  // samples; 0: max(30, estimation length / 16)
+  std::size_t start = 0;               // first equation sample t0 (0: from the largest lag)
+  std::size_t end = 0;                 // one past the last estimation sample (0: all)
+  // Among structures within this many fitness points of the best: fewest na + nb, then the
+  // smallest nk, then the smallest na (the core's rule; fitness alone prefers bigger models).
+  double parsimony_percent = 0.1;
+};
+
+struct LinearFit {
+  bool ok = false;  // false: no structure gave a stable model
+  ArxStructure structure;
+  std::vector<double> a, b;         // A = 1 + a1 q^-1 + ...; b carries the gain
+  double c = 0.0;                   // 0 with drift (the hat functions sum to one)
+  std::vector<double> drift_knots;  // d at the knots (empty without drift)
+  double sse = std::numeric_limits<double>::infinity();  // simulated output, estimation window
+  double fitness_percent = std::numeric_limits<double>::quiet_NaN();
+};
+
+// The linear half of the separable problem for one output record. Everything that does not
+// depend on x (lagged outputs, drift basis, their Gram blocks) is built once; each fit() costs
+// one pass over x for the x-dependent Gram blocks plus one simulation per structure.
+// Thread-safe for concurrent fit() calls.
+class ArxEstimator {
+ public:
+  // Throws std::invalid_argument when the window is too short for the structure range.
+  ArxEstimator(std::vector<double> y, const LinearOptions& opt);
+
+  // Best structure of the range for valve position x (x.size() == y.size()); with `parsimony`
+  // the rule of LinearOptions::parsimony_percent picks among near-best structures.
+  LinearFit fit(const std::vector<double>& x, bool parsimony = false) const;
+  LinearFit fit(const std::vector<double>& x, const ArxStructure& s) const;
+  // Simulated output over the whole record (samples before start() copied from y; the drift
+  // held after end()).
+  std::vector<double> simulate(const LinearFit& f, const std::vector<double>& x) const;
+  // The estimated load d(t) over the whole record (empty without drift).
+  std::vector<double> drift_series(const LinearFit& f) const;
+
+  std::size_t start() const { return t0_; }
+  std::size_t end() const { return end_; }
+  std::size_t knot_spacing() const { return h_; }
+  const LinearOptions& options() const { return opt_; }
+
+ private:
+  struct Gram;
+  Gram x_blocks(const std::vector<double>& x) const;
+  LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x) const;
+  double window_sse(const LinearFit& f, const std::vector<double>& x) const;
+
+  std::vector<double> y_, w_;  // output and regression target (w = y or its difference)
+  LinearOptions opt_;
+  std::size_t t0_ = 0, end_ = 0, h_ = 0, knots_ = 0;
+  int lag0_ = 1, lags_ = 0;  // x lags lag0_ .. lag0_ + lags_ - 1
+  int nfixed_ = 0;           // fixed columns: w lags 1..na_max, then const or hats
+  std::vector<double> F_;    // fixed columns, column-major, rows t0..end-1
+  std::vector<double> FF_, Fw_;
+  double ww_ = 0.0, den_ = 0.0;
+};
+
+// Bounds and units of one coordinate of the outer search.
+struct SearchParameter {
+  std::string name, unit;
+  double lower = 0.0, upper = 0.0;
+};
+
+// What the data says about the search box: the OP range and the sample period.
+struct InputRange {
+  double umin = 0.0, umax = 100.0, Ts = 1.0;
+};
+
+// Search coordinates of one valve effect, bounded from the OP range R = umax - umin:
+//   stiction he: fs in [0, R], r = fd/fs in [0, 1] (keeps fs >= fd);
+//   kano, choudhury: S in [0, R], r = J/S in [0, 1];  stenman: d in [0, R];  deadband: d in [0, R]
+//     (a band wider than the OP range never lets the valve move);
+//   saturation: lower in [umin, umax - R/100], upper = lower + share (umax - lower), share in
+//     [0.01, 1];
+//   characteristic auto: signed curvature k in [-ln 200, ln 200] (k > 0 equal-percentage with
+//     R = e^k, k < 0 quick-opening with R = e^-k, |k| < 1e-3 linear); a fixed kind: ln R in
+//     [1e-3, ln 200];
+//   actuator-lag: tau in [0, 60 Ts].
+// `preisach` and process effects have none (they are fitted otherwise). Throws for unknown names.
+std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputRange& r);
+// The block for coordinates theta (as many as search_parameters gives).
+ValveEffect make_valve_block(const EffectSpec& e, const double* theta, const InputRange& r);
+
+struct NamedValue {
+  std::string name;
+  double value = 0.0;
+  std::string unit;
+};
+// The physical parameters of a block as reported: fs, fd / S, J / d / lower, upper / R / tau.
+std::vector<NamedValue> block_parameters(const ValveEffect& block);
+
+}  // namespace valvediag

@@ -1,0 +1,106 @@
+// Fitting a composable model (model_spec.hpp) to OP/PV data.
+//
+// Valve effects other than `preisach` are fitted by Jelali's separable least squares: for given
+// valve parameters x = f(u) is simulated through the effect blocks (in canonical chain order),
+// the ARX part is fitted by linear least squares over the structure grid (effect_estimators.hpp)
+// and scored by the simulated-output error (eq 20). All valve parameters of the chain are searched
+// jointly with NLopt: a global stage (DIRECT-L, or a coarse grid evaluated in parallel) and a
+// Nelder-Mead polish from its best point, in boxes from the OP range.
+// `preisach` is fitted by the core's identify() on a restricted grid.
+// Process effects change the linear part: `delay` extends the nk range, `order` the na/nb range,
+// `integrator` fixes a (1 - q^-1) factor in A, `disturbance` adds a piecewise-linear slow load.
+#pragma once
+
+#include <cstddef>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "valvediag/effect_estimators.hpp"
+#include "valvediag/hammerstein.hpp"
+#include "valvediag/model_spec.hpp"
+#include "valvediag/valve_effects.hpp"
+
+namespace valvediag {
+
+enum class GlobalSearch { DirectL, Grid };
+
+struct ModelFitOptions {
+  StructureRange structure;  // the base grid (small: every trial fit of `diagnose` pays for it)
+  int delay_nk_max = 30;     // nk range with `delay`
+  int order_max = 4;         // na, nb range with `order`
+  double validation_fraction = 0.0;  // last fraction held out (0: none)
+  std::size_t validation_start = 0;  // or the first held-out sample (0: use the fraction)
+  // Grid: every point of a regular grid (parallel), then a polish from each of the best
+  // `polish_starts` points that are not grid neighbours of a better one. DirectL: NLopt's
+  // GN_DIRECT_L (sequential), one polish from its best point; also used above 5000 grid points.
+  GlobalSearch global = GlobalSearch::Grid;
+  int global_evaluations = 0;  // DIRECT-L budget; 0: 100 per search dimension
+  int grid_points = 0;         // per dimension; 0: 41, 21, 9, 6 for 1, 2, 3, 4 dimensions
+  int polish_starts = 3;
+  int local_evaluations = 0;  // 0: 60 per search dimension (Nelder-Mead)
+  double local_xtol = 1e-4;   // relative to each coordinate's box width
+  int preisach_L_min = 2, preisach_L_max = 16;
+  std::size_t disturbance_knot_spacing = 0;  // samples; 0: LinearOptions' default
+  int threads = 0;                           // 0: all cores (Grid search, preisach, fit_models)
+};
+
+// How the solver ended. Impossible problems (bad data, bad options) throw instead.
+enum class ModelFitStatus {
+  Converged,         // the local polish met its tolerance (or nothing to search)
+  EvaluationLimit,   // the polish used its evaluation budget before meeting the tolerance
+  NumericalTrouble,  // NLopt reported a failure; the best point seen is returned
+  NoStableModel,     // no structure gave a stable linear part: fitness is NaN
+};
+const char* to_string(ModelFitStatus s);
+
+struct FittedEffect {
+  std::string name;
+  std::string variant;  // stiction model, characteristic kind found, "" otherwise
+  std::vector<NamedValue> parameters;
+};
+
+struct ModelFit {
+  ModelSpec spec;
+  ModelFitStatus status = ModelFitStatus::Converged;
+  std::string stop_reason;
+  std::vector<FittedEffect> effects;  // one per effect of the spec, same order
+  ArxStructure structure;
+  bool integrating = false;  // A = (1 - q^-1) A'(q^-1): a, b, c belong to the differenced form
+  std::vector<double> a, b;
+  double c = 0.0;
+  std::vector<double> disturbance;  // estimated slow load d(t) (empty without `disturbance`)
+  double fitness_percent = std::numeric_limits<double>::quiet_NaN();  // estimation (eq 20)
+  double validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();  // NaN: no split
+  std::size_t first_sample = 0;    // t0: samples before it seed the simulation
+  std::size_t estimation_end = 0;  // one past the last estimation sample
+  std::vector<double> x_hat;       // simulated valve position (preisach: gamma' mu, ||b|| = 1)
+  std::vector<double> y_sim;       // simulated output, whole record
+  std::vector<ValveEffect> valve;  // fitted blocks (empty for linear and preisach)
+  std::optional<HammersteinModel> preisach;  // the identified Preisach model
+  int evaluations = 0;  // separable-problem evaluations (each: one valve simulation + grid)
+  double elapsed_s = 0.0;
+};
+
+// u: OP, y: PV, Ts: sample period (s). Throws std::invalid_argument for impossible problems
+// (lengths differ, too few samples, non-finite samples, constant OP, Ts <= 0, bad options).
+ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                   const ModelSpec& spec, const ModelFitOptions& opt = {});
+// Independent fits of several specs on the same data, shared out over the cores.
+std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector<double>& y,
+                                 double Ts, const std::vector<ModelSpec>& specs,
+                                 const ModelFitOptions& opt = {});
+
+// The fitted model driven by another record of the same loop (validation on separate data, as in
+// the paper's Example 4): the valve from rest at u[0] (Preisach: the fitted initial memory), the
+// first `first_sample` outputs seed the simulation, a fitted disturbance is held at its last value.
+// Throws std::invalid_argument when the fit has no model or the record is too short.
+std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double>& u,
+                                   const std::vector<double>& y);
+
+// The linear options fit_model uses for a spec (structure range widened by delay/order,
+// integrator, disturbance, estimation window), for callers that reuse ArxEstimator.
+LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, std::size_t N);
+
+}  // namespace valvediag

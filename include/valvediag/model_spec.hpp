@@ -1,0 +1,71 @@
+// Composable loop models: a chain of named effects (../shared/design/effects.md; the names are
+// product interface) starting from `linear` (x = u).
+//
+//   OP u -> valve effects -> valve position x -> process effects -> PV y
+//
+// A spec is written as effect names joined by '+', each optionally with a variant after ':', e.g.
+// `stiction+saturation`, `stiction:kano`, `preisach+integrator`, `linear`. Specs are kept in one
+// canonical order (the physical order of the chain, below), so `saturation+stiction` and
+// `stiction+saturation` are the same model and print the same way.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace valvediag {
+
+enum class EffectStage { Valve, Process };
+
+struct EffectInfo {
+  std::string name;
+  EffectStage stage;
+  std::vector<std::string> variants;  // first = default; empty: the effect has no variants
+  std::string summary;                // one line, what the estimator fits
+};
+
+// The vocabulary in canonical chain order: actuator-lag, stiction, deadband, preisach,
+// saturation, characteristic (valve), then delay, order, integrator, disturbance (process).
+// `linear` is not an effect: it names the empty chain.
+const std::vector<EffectInfo>& effect_vocabulary();
+// nullptr when unknown.
+const EffectInfo* find_effect(std::string_view name);
+
+// A bad spec: unknown name or variant, duplicate, or a combination the estimators cannot fit.
+// The message lists the vocabulary where that helps.
+class ModelSpecError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+struct EffectSpec {
+  std::string name;
+  std::string variant;  // always filled for effects with variants (the default when not given)
+  bool operator==(const EffectSpec&) const = default;
+};
+
+struct ModelSpec {
+  std::vector<EffectSpec> effects;  // canonical order, each name at most once; empty = linear
+
+  bool has(std::string_view name) const { return find(name) != nullptr; }
+  const EffectSpec* find(std::string_view name) const;
+  bool operator==(const ModelSpec&) const = default;
+};
+
+// Parses "linear", "stiction", "stiction:kano+saturation", ... (spaces around names ignored).
+// Throws ModelSpecError.
+ModelSpec parse_model_spec(std::string_view text);
+// "effect" or "effect:variant"; default variants are left out ("stiction", "stiction:kano").
+EffectSpec parse_effect(std::string_view text);
+// Canonical text: "linear" for the empty chain, default variants left out.
+std::string to_string(const ModelSpec& spec);
+std::string to_string(const EffectSpec& effect);
+
+// The spec with `effect` ("name" or "name:variant") added. Adding an effect that is present with
+// another variant switches the variant; adding one already present as given throws.
+ModelSpec add_effect(const ModelSpec& spec, std::string_view effect);
+// The spec without the effect named (a variant, if given, must match). Throws when absent.
+ModelSpec remove_effect(const ModelSpec& spec, std::string_view effect);
+
+}  // namespace valvediag

@@ -1,0 +1,619 @@
+#include "valvediag/model_fit.hpp"
+
+#include <nlopt.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+
+#include "valvediag/identification.hpp"
+
+namespace valvediag {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+unsigned thread_count(int requested) {
+  return requested > 0 ? static_cast<unsigned>(requested)
+                       : std::max(1u, std::thread::hardware_concurrency());
+}
+
+std::size_t estimation_end(std::size_t N, const ModelFitOptions& opt) {
+  if (opt.validation_start > 0) return std::min(opt.validation_start, N);
+  if (opt.validation_fraction > 0)
+    return static_cast<std::size_t>(
+        std::llround(static_cast<double>(N) * (1.0 - opt.validation_fraction)));
+  return N;
+}
+
+void check_problem(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                   const ModelFitOptions& opt) {
+  if (u.size() != y.size()) throw std::invalid_argument("OP and PV differ in length");
+  if (!(std::isfinite(Ts) && Ts > 0)) throw std::invalid_argument("sample period must be > 0");
+  if (!(opt.validation_fraction >= 0 && opt.validation_fraction < 0.9))
+    throw std::invalid_argument("validation fraction must lie in [0, 0.9)");
+  if (opt.validation_start > 0 && opt.validation_start + 10 > u.size())
+    throw std::invalid_argument("the validation part starts too close to the end of the data");
+  if (opt.delay_nk_max < opt.structure.nk_max || opt.order_max < 1 ||
+      (opt.grid_points != 0 && opt.grid_points < 2) || opt.polish_starts < 1 ||
+      opt.global_evaluations < 0 || opt.local_evaluations < 0 || !(opt.local_xtol > 0))
+    throw std::invalid_argument("model fit options out of range");
+  for (std::size_t t = 0; t < u.size(); ++t)
+    if (!std::isfinite(u[t]) || !std::isfinite(y[t]))
+      throw std::invalid_argument("non-finite sample at index " + std::to_string(t));
+  if (u.empty()) throw std::invalid_argument("no samples");
+  const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
+  if (!(*hi > *lo)) throw std::invalid_argument("the input is constant: nothing to identify");
+}
+
+// The outer problem: valve coordinates (scaled to the unit box) -> simulated-output SSE.
+struct Search {
+  Search(const std::vector<double>& u_, const ArxEstimator& est_, InputRange r)
+      : u(u_), est(est_), range(r) {}
+  const std::vector<double>& u;
+  const ArxEstimator& est;
+  std::vector<EffectSpec> effects;  // valve effects with coordinates, chain order
+  std::vector<SearchParameter> coords;
+  std::vector<std::size_t> offset;  // first coordinate of each effect
+  InputRange range;
+  double penalty = 0.0;  // cost of a point with no stable model
+  std::atomic<int> evaluations{0};
+  std::mutex mtx;
+  double best_cost = std::numeric_limits<double>::infinity();
+  std::vector<double> best_z;
+  std::exception_ptr error;
+
+  std::vector<double> theta(const double* z) const {
+    std::vector<double> th(coords.size());
+    for (std::size_t i = 0; i < coords.size(); ++i)
+      th[i] = coords[i].lower + std::clamp(z[i], 0.0, 1.0) * (coords[i].upper - coords[i].lower);
+    return th;
+  }
+  ValveChain chain(const double* z) const {
+    const auto th = theta(z);
+    std::vector<ValveEffect> blocks;
+    for (std::size_t k = 0; k < effects.size(); ++k)
+      blocks.push_back(make_valve_block(effects[k], th.data() + offset[k], range));
+    return ValveChain(std::move(blocks));
+  }
+  std::vector<double> valve_position(const double* z) const {
+    ValveChain c = chain(z);
+    std::vector<double> x(u.size());
+    c.reset(u[0]);
+    for (std::size_t t = 0; t < u.size(); ++t) x[t] = c.step(u[t]);
+    return x;
+  }
+  // The coordinates searched (indices into coords); the others stay at `base`. Empty: all.
+  std::vector<std::size_t> active;
+  std::vector<double> base;
+  std::size_t dim() const { return active.empty() ? coords.size() : active.size(); }
+  std::vector<double> full(const double* za) const {
+    if (active.empty()) return std::vector<double>(za, za + coords.size());
+    std::vector<double> z = base;
+    for (std::size_t i = 0; i < active.size(); ++i) z[active[i]] = za[i];
+    return z;
+  }
+  std::vector<double> restrict_to_active(const std::vector<double>& z) const {
+    if (active.empty()) return z;
+    std::vector<double> za(active.size());
+    for (std::size_t i = 0; i < active.size(); ++i) za[i] = z[active[i]];
+    return za;
+  }
+  double cost(const double* za) {
+    ++evaluations;
+    const std::vector<double> z = full(za);
+    const LinearFit f = est.fit(valve_position(z.data()));
+    const double c = f.ok ? f.sse : penalty;
+    std::lock_guard<std::mutex> lock(mtx);
+    if (c < best_cost) {
+      best_cost = c;
+      best_z = z;
+    }
+    return c;
+  }
+};
+
+double nlopt_cost(unsigned n, const double* z, double* grad, void* data) {
+  (void)n;
+  (void)grad;  // derivative-free algorithms only
+  auto* s = static_cast<Search*>(data);
+  try {
+    return s->cost(z);
+  } catch (...) {
+    std::lock_guard<std::mutex> lock(s->mtx);
+    if (!s->error) s->error = std::current_exception();
+    return s->penalty;
+  }
+}
+
+struct NloptRun {
+  nlopt_result result;
+};
+
+NloptRun run_nlopt(nlopt_algorithm alg, Search& s, std::vector<double>& z, int maxeval, double xtol,
+                   double* fmin = nullptr, double initial_step = 0.05) {
+  const unsigned n = static_cast<unsigned>(z.size());
+  nlopt_opt o = nlopt_create(alg, n);
+  if (!o) throw std::runtime_error("NLopt could not create an optimizer");
+  const std::vector<double> lb(n, 0.0), ub(n, 1.0), step(n, initial_step);
+  nlopt_set_lower_bounds(o, lb.data());
+  nlopt_set_upper_bounds(o, ub.data());
+  nlopt_set_min_objective(o, nlopt_cost, &s);
+  nlopt_set_maxeval(o, maxeval);
+  if (xtol > 0) nlopt_set_xtol_abs1(o, xtol);
+  if (alg == NLOPT_LN_NELDERMEAD) nlopt_set_initial_step(o, step.data());
+  double f = 0.0;
+  const nlopt_result r = nlopt_optimize(o, z.data(), &f);
+  nlopt_destroy(o);
+  if (fmin) *fmin = f;
+  if (s.error) std::rethrow_exception(s.error);
+  return {r};
+}
+
+// Grid over the unit box evaluated on all cores; returns every point's cost (index order).
+std::vector<double> grid_search(Search& s, int points, unsigned threads) {
+  const std::size_t n = s.dim();
+  std::size_t total = 1;
+  for (std::size_t i = 0; i < n; ++i) total *= static_cast<std::size_t>(points);
+  std::vector<double> costs(total);
+  std::atomic<std::size_t> next{0};
+  auto work = [&] {
+    std::vector<double> z(n);
+    for (std::size_t k; (k = next.fetch_add(1)) < total;) {
+      std::size_t r = k;
+      for (std::size_t i = 0; i < n; ++i) {
+        z[i] = static_cast<double>(r % static_cast<std::size_t>(points)) / (points - 1);
+        r /= static_cast<std::size_t>(points);
+      }
+      costs[k] = nlopt_cost(static_cast<unsigned>(n), z.data(), nullptr, &s);
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned i = 1; i < std::min<std::size_t>(threads, total); ++i) pool.emplace_back(work);
+  work();
+  for (auto& t : pool) t.join();
+  if (s.error) std::rethrow_exception(s.error);
+  return costs;
+}
+
+// The best grid points that are not neighbours of a better one: starts for the local polish
+// (stick-slip costs are rugged, a single start often polishes a side ridge).
+std::vector<std::vector<double>> grid_starts(const std::vector<double>& costs, std::size_t n,
+                                             int points, int count) {
+  std::vector<std::size_t> order(costs.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](auto a, auto b) { return costs[a] < costs[b]; });
+  auto coords = [&](std::size_t k) {
+    std::vector<int> c(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      c[i] = static_cast<int>(k % static_cast<std::size_t>(points));
+      k /= static_cast<std::size_t>(points);
+    }
+    return c;
+  };
+  std::vector<std::vector<int>> picked;
+  for (std::size_t k : order) {
+    if (static_cast<int>(picked.size()) >= count) break;
+    const auto c = coords(k);
+    bool near = false;
+    for (const auto& p : picked) {
+      int dist = 0;
+      for (std::size_t i = 0; i < n; ++i) dist = std::max(dist, std::abs(p[i] - c[i]));
+      near = near || dist <= 1;
+    }
+    if (!near) picked.push_back(c);
+  }
+  std::vector<std::vector<double>> starts;
+  for (const auto& c : picked) {
+    std::vector<double> z(n);
+    for (std::size_t i = 0; i < n; ++i) z[i] = static_cast<double>(c[i]) / (points - 1);
+    starts.push_back(z);
+  }
+  return starts;
+}
+
+// Global stage plus local polishes over the active coordinates; returns the winning polish's
+// NLopt result (s.best_z holds the best point seen).
+nlopt_result search_space(Search& s, const ModelFitOptions& opt) {
+  const int dim = static_cast<int>(s.dim());
+  const int n_global = opt.global_evaluations > 0 ? opt.global_evaluations : 100 * dim;
+  const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations : 60 * dim;
+  const unsigned threads = thread_count(opt.threads);
+  int points = opt.grid_points;
+  if (points == 0) points = dim == 1 ? 41 : dim == 2 ? 21 : dim == 3 ? 9 : 6;
+  std::vector<std::vector<double>> starts;
+  double step = 0.05;
+  if (opt.global == GlobalSearch::Grid && std::pow(points, dim) <= 5000) {
+    const auto costs = grid_search(s, points, threads);
+    starts = grid_starts(costs, s.dim(), points, std::max(1, opt.polish_starts));
+    step = 0.5 / (points - 1);
+  } else {
+    std::vector<double> z(s.dim(), 0.5);
+    run_nlopt(NLOPT_GN_DIRECT_L, s, z, n_global, 0.0);
+    starts.push_back(s.restrict_to_active(s.best_z));
+  }
+  // Independent polishes, one per start, on the cores.
+  std::vector<nlopt_result> results(starts.size(), NLOPT_SUCCESS);
+  std::vector<double> ends(starts.size(), std::numeric_limits<double>::infinity());
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr error;
+  std::mutex emtx;
+  auto work = [&] {
+    try {
+      for (std::size_t k; (k = next.fetch_add(1)) < starts.size();) {
+        std::vector<double> zk = starts[k];
+        results[k] =
+            run_nlopt(NLOPT_LN_NELDERMEAD, s, zk, n_local, opt.local_xtol, &ends[k], step).result;
+      }
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(emtx);
+      if (!error) error = std::current_exception();
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned i = 1; i < std::min<std::size_t>(threads, starts.size()); ++i)
+    pool.emplace_back(work);
+  work();
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+  const std::size_t winner =
+      static_cast<std::size_t>(std::min_element(ends.begin(), ends.end()) - ends.begin());
+  return results[winner];
+}
+
+// Coordinates at which every effect is absent (x = u): zero bands, limits at the OP range,
+// zero curvature, zero lag.
+std::vector<double> neutral_point(const Search& s) {
+  std::vector<double> z(s.coords.size(), 0.0);
+  for (std::size_t k = 0; k < s.effects.size(); ++k) {
+    const auto& e = s.effects[k];
+    if (e.name == "saturation") z[s.offset[k] + 1] = 1.0;
+    if (e.name == "characteristic" && e.variant == "auto") z[s.offset[k]] = 0.5;
+  }
+  return z;
+}
+
+std::vector<double> difference(const std::vector<double>& y) {
+  std::vector<double> w(y.size(), 0.0);
+  for (std::size_t t = 1; t < y.size(); ++t) w[t] = y[t] - y[t - 1];
+  return w;
+}
+
+// Reported parameters of the process effects, from the fitted linear part.
+void describe_process_effects(ModelFit& fit, const ArxEstimator* est, double Ts) {
+  for (auto& fe : fit.effects) {
+    if (fe.name == "delay") {
+      fe.parameters = {{"nk", static_cast<double>(fit.structure.nk), "samples"},
+                       {"dead_time", fit.structure.nk * Ts, "s"}};
+    } else if (fe.name == "order") {
+      fe.parameters = {{"na", static_cast<double>(fit.structure.na), ""},
+                       {"nb", static_cast<double>(fit.structure.nb), ""}};
+    } else if (fe.name == "integrator" || fe.name == "disturbance") {
+      double a1 = 1.0, bsum = 0.0;
+      for (double v : fit.a) a1 += v;
+      for (double v : fit.b) bsum += v;
+      if (fe.name == "integrator") {
+        fe.parameters = {{"rate_gain", bsum / a1 / Ts, "PV/s per %"}};
+      } else if (!fit.disturbance.empty()) {
+        const auto [lo, hi] = std::minmax_element(
+            fit.disturbance.begin() + static_cast<std::ptrdiff_t>(fit.first_sample),
+            fit.disturbance.end());
+        // The load as its steady-state effect on PV (d / A(1)), or as a PV rate when integrating.
+        fe.parameters = {
+            {"knot_spacing", est ? static_cast<double>(est->knot_spacing()) * Ts : 0.0, "s"},
+            {"load_range", (*hi - *lo) / a1 / (fit.integrating ? Ts : 1.0),
+             fit.integrating ? "PV/s" : "PV"}};
+      }
+    }
+  }
+}
+
+ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                      const ModelSpec& spec, const ModelFitOptions& opt, ModelFit fit) {
+  const LinearOptions lo = linear_options(spec, opt, u.size());
+  FitOptions fo;
+  fo.na_min = lo.range.na_min;
+  fo.na_max = lo.range.na_max;
+  fo.nb_min = lo.range.nb_min;
+  fo.nb_max = lo.range.nb_max;
+  fo.nk_min = lo.range.nk_min;
+  fo.nk_max = lo.range.nk_max;
+  fo.L_min = opt.preisach_L_min;
+  fo.L_max = opt.preisach_L_max;
+  fo.validation_fraction = opt.validation_fraction;
+  fo.validation_start = opt.validation_start;
+  fo.threads = opt.threads;
+  fo.keep_all_configurations = true;
+  const std::vector<double> target = lo.integrating ? difference(y) : y;
+  const IdentificationResult res = identify(u, target, fo);
+  fit.evaluations = static_cast<int>(res.configurations.size());
+  fit.first_sample = res.first_sample;
+  fit.estimation_end = res.estimation_end;
+  if (res.status == IdentificationStatus::NoStableModel) {
+    fit.status = ModelFitStatus::NoStableModel;
+    fit.stop_reason = "no stable Preisach-ARX configuration";
+    return fit;
+  }
+  const HammersteinModel& m = res.model;
+  fit.preisach = m;
+  fit.x_hat = simulate_valve(m, u);
+  fit.structure = {m.structure.na, m.structure.nb, m.structure.nk};
+  switch (res.best.status) {
+    case SolverStatus::Converged:
+      fit.status = ModelFitStatus::Converged;
+      break;
+    case SolverStatus::IterationLimit:
+      fit.status = ModelFitStatus::EvaluationLimit;
+      break;
+    case SolverStatus::NumericalTrouble:
+      fit.status = ModelFitStatus::NumericalTrouble;
+      break;
+  }
+  fit.stop_reason = "preisach: " + res.best.stop_reason;
+  int nonzero = 0;
+  for (double v : m.mu) nonzero += v > 0;
+  for (auto& fe : fit.effects) {
+    if (fe.name != "preisach") continue;
+    fe.parameters = {{"L", static_cast<double>(m.grid.L), "levels"},
+                     {"nonzero_weights", static_cast<double>(nonzero), ""},
+                     {"umin", m.grid.umin, "%"},
+                     {"umax", m.grid.umax, "%"}};
+  }
+  std::optional<ArxEstimator> est;
+  if (lo.drift) {
+    // The load term is not in the core's problem: refit the linear part with the drift for the
+    // identified valve position (one separable step, weights kept).
+    LinearOptions l2 = lo;
+    l2.start = res.first_sample;
+    l2.end = res.estimation_end;
+    est.emplace(y, l2);
+    const LinearFit f = est->fit(fit.x_hat, true);
+    if (!f.ok) {
+      fit.status = ModelFitStatus::NoStableModel;
+      fit.stop_reason = "no stable linear part with the disturbance term";
+      return fit;
+    }
+    fit.structure = f.structure;
+    fit.a = f.a;
+    fit.b = f.b;
+    fit.c = f.c;
+    fit.disturbance = est->drift_series(f);
+    fit.y_sim = est->simulate(f, fit.x_hat);
+    fit.first_sample = est->start();
+  } else {
+    fit.a = m.a;
+    fit.b = m.b;
+    fit.c = m.c;
+    fit.y_sim = simulate_arx(m, fit.x_hat, target, res.first_sample);
+    if (lo.integrating) {
+      for (std::size_t t = 0; t < res.first_sample; ++t) fit.y_sim[t] = y[t];
+      for (std::size_t t = res.first_sample; t < y.size(); ++t)
+        fit.y_sim[t] = fit.y_sim[t - 1] + fit.y_sim[t];
+    }
+  }
+  fit.fitness_percent = fitness_percent(y, fit.y_sim, fit.first_sample, fit.estimation_end);
+  if (fit.estimation_end < y.size())
+    fit.validation_fitness_percent = fitness_percent(y, fit.y_sim, fit.estimation_end, y.size());
+  describe_process_effects(fit, est ? &*est : nullptr, Ts);
+  return fit;
+}
+
+}  // namespace
+
+const char* to_string(ModelFitStatus s) {
+  switch (s) {
+    case ModelFitStatus::Converged:
+      return "converged";
+    case ModelFitStatus::EvaluationLimit:
+      return "evaluation limit";
+    case ModelFitStatus::NumericalTrouble:
+      return "numerical trouble";
+    case ModelFitStatus::NoStableModel:
+      return "no stable model";
+  }
+  return "?";
+}
+
+LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, std::size_t N) {
+  LinearOptions lo;
+  lo.range = opt.structure;
+  if (spec.has("delay")) lo.range.nk_max = opt.delay_nk_max;
+  if (spec.has("order")) {
+    lo.range.na_max = std::max(lo.range.na_max, opt.order_max);
+    lo.range.nb_max = std::max(lo.range.nb_max, opt.order_max);
+  }
+  lo.integrating = spec.has("integrator");
+  lo.drift = spec.has("disturbance");
+  lo.drift_knot_spacing = opt.disturbance_knot_spacing;
+  lo.end = estimation_end(N, opt);
+  return lo;
+}
+
+ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                   const ModelSpec& spec, const ModelFitOptions& opt) {
+  const auto t_start = std::chrono::steady_clock::now();
+  check_problem(u, y, Ts, opt);
+  ModelFit fit;
+  fit.spec = spec;
+  fit.integrating = spec.has("integrator");
+  for (const auto& e : spec.effects) fit.effects.push_back({e.name, e.variant, {}});
+  auto finish = [&](ModelFit& f) {
+    f.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  };
+  if (spec.has("preisach")) {
+    fit = fit_preisach(u, y, Ts, spec, opt, std::move(fit));
+    finish(fit);
+    return fit;
+  }
+
+  const LinearOptions lo = linear_options(spec, opt, u.size());
+  const ArxEstimator est(y, lo);
+  fit.first_sample = est.start();
+  fit.estimation_end = est.end();
+  const auto [umin, umax] = std::minmax_element(u.begin(), u.end());
+  Search s(u, est, InputRange{*umin, *umax, Ts});
+  for (const auto& e : spec.effects) {
+    const auto c = search_parameters(e, s.range);
+    if (c.empty()) continue;
+    s.effects.push_back(e);
+    s.offset.push_back(s.coords.size());
+    s.coords.insert(s.coords.end(), c.begin(), c.end());
+  }
+  {
+    double mean = 0.0, den = 0.0;
+    for (std::size_t t = est.start(); t < est.end(); ++t) mean += y[t];
+    mean /= static_cast<double>(est.end() - est.start());
+    for (std::size_t t = est.start(); t < est.end(); ++t) den += (y[t] - mean) * (y[t] - mean);
+    s.penalty = 10.0 * den + 1.0;  // fitness about -216 %: worse than any stable fit
+  }
+
+  std::vector<double> z(s.coords.size(), 0.5);
+  fit.status = ModelFitStatus::Converged;
+  fit.stop_reason = "no valve parameters to search";
+  if (!s.coords.empty()) {
+    nlopt_result outcome = NLOPT_SUCCESS;
+    if (s.effects.size() > 1) {
+      // Composed chains: each effect first on its own (the others at rest), then a joint polish
+      // of all coordinates from there (a joint grid is too coarse in 4 or more dimensions).
+      s.base = neutral_point(s);
+      // Two passes: an effect fitted with the others still at rest can take a wrong basin.
+      for (std::size_t pass = 0; pass < 2 * s.effects.size(); ++pass) {
+        const std::size_t k = pass % s.effects.size();
+        s.active.clear();
+        const std::size_t end = k + 1 < s.effects.size() ? s.offset[k + 1] : s.coords.size();
+        for (std::size_t i = s.offset[k]; i < end; ++i) s.active.push_back(i);
+        search_space(s, opt);
+        s.base = s.best_z;
+      }
+      s.active.clear();
+      std::vector<double> zj = s.base;
+      const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations
+                                                    : 60 * static_cast<int>(s.coords.size());
+      outcome =
+          run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, nullptr, 0.02).result;
+    } else {
+      outcome = search_space(s, opt);
+    }
+    z = s.best_z;
+    switch (outcome) {
+      case NLOPT_SUCCESS:
+      case NLOPT_STOPVAL_REACHED:
+      case NLOPT_FTOL_REACHED:
+      case NLOPT_XTOL_REACHED:
+        fit.status = ModelFitStatus::Converged;
+        fit.stop_reason = "Nelder-Mead polish met its tolerance";
+        break;
+      case NLOPT_MAXEVAL_REACHED:
+      case NLOPT_MAXTIME_REACHED:
+        fit.status = ModelFitStatus::EvaluationLimit;
+        fit.stop_reason = "Nelder-Mead polish used its evaluation budget";
+        break;
+      default:
+        fit.status = ModelFitStatus::NumericalTrouble;
+        fit.stop_reason = "NLopt failed (code " + std::to_string(static_cast<int>(outcome)) +
+                          "); best point seen kept";
+        break;
+    }
+    fit.evaluations = s.evaluations.load();
+    ValveChain chain = s.chain(z.data());
+    fit.valve = chain.effects();
+    for (std::size_t k = 0; k < s.effects.size(); ++k) {
+      for (auto& fe : fit.effects) {
+        if (fe.name != s.effects[k].name) continue;
+        fe.parameters = block_parameters(fit.valve[k]);
+        fe.variant = effect_model(fit.valve[k]);
+      }
+    }
+  }
+  fit.x_hat = s.coords.empty() ? u : s.valve_position(z.data());
+  const LinearFit f = est.fit(fit.x_hat, true);
+  ++fit.evaluations;
+  if (!f.ok) {
+    fit.status = ModelFitStatus::NoStableModel;
+    fit.stop_reason = "no structure gave a stable linear part";
+    finish(fit);
+    return fit;
+  }
+  fit.structure = f.structure;
+  fit.a = f.a;
+  fit.b = f.b;
+  fit.c = f.c;
+  fit.disturbance = est.drift_series(f);
+  fit.y_sim = est.simulate(f, fit.x_hat);
+  fit.fitness_percent = fitness_percent(y, fit.y_sim, fit.first_sample, fit.estimation_end);
+  if (fit.estimation_end < y.size())
+    fit.validation_fitness_percent = fitness_percent(y, fit.y_sim, fit.estimation_end, y.size());
+  describe_process_effects(fit, &est, Ts);
+  finish(fit);
+  return fit;
+}
+
+std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double>& u,
+                                   const std::vector<double>& y) {
+  if (u.size() != y.size()) throw std::invalid_argument("OP and PV differ in length");
+  if (fit.status == ModelFitStatus::NoStableModel || fit.b.empty())
+    throw std::invalid_argument("the fit has no model to simulate");
+  const std::size_t t0 = fit.first_sample, N = u.size();
+  if (N <= t0) throw std::invalid_argument("record shorter than the model's lags");
+  std::vector<double> x(N);
+  if (fit.preisach) {
+    x = simulate_valve(*fit.preisach, u);
+  } else {
+    ValveChain chain(fit.valve);
+    chain.reset(u[0]);
+    for (std::size_t t = 0; t < N; ++t) x[t] = chain.step(u[t]);
+  }
+  const double load =
+      fit.disturbance.empty()
+          ? fit.c
+          : fit.disturbance[std::min(fit.estimation_end, fit.disturbance.size()) - 1];
+  std::vector<double> ys(y), ws(N, 0.0);
+  for (std::size_t t = 1; t < N; ++t) ws[t] = y[t] - y[t - 1];
+  std::vector<double>& v = fit.integrating ? ws : ys;
+  const std::size_t nk = static_cast<std::size_t>(fit.structure.nk);
+  for (std::size_t t = t0; t < N; ++t) {
+    double s = load;
+    for (std::size_t i = 1; i <= fit.a.size(); ++i) s -= fit.a[i - 1] * v[t - i];
+    for (std::size_t k = 1; k <= fit.b.size(); ++k)
+      if (t >= nk + k) s += fit.b[k - 1] * x[t - nk - k];
+    v[t] = s;
+    if (fit.integrating) ys[t] = ys[t - 1] + s;
+  }
+  return ys;
+}
+
+std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector<double>& y,
+                                 double Ts, const std::vector<ModelSpec>& specs,
+                                 const ModelFitOptions& opt) {
+  std::vector<ModelFit> out(specs.size());
+  const unsigned threads = std::min<unsigned>(
+      thread_count(opt.threads), static_cast<unsigned>(std::max<std::size_t>(1, specs.size())));
+  ModelFitOptions one = opt;
+  one.threads = 1;  // the parallelism is across the specs
+  std::atomic<std::size_t> next{0};
+  std::mutex mtx;
+  std::exception_ptr error;
+  auto work = [&] {
+    try {
+      for (std::size_t k; (k = next.fetch_add(1)) < specs.size();)
+        out[k] = fit_model(u, y, Ts, specs[k], one);
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(mtx);
+      if (!error) error = std::current_exception();
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned i = 1; i < threads; ++i) pool.emplace_back(work);
+  work();
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+  return out;
+}
+
+}  // namespace valvediag

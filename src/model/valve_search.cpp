@@ -1,0 +1,104 @@
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "valvediag/effect_estimators.hpp"
+
+namespace valvediag {
+namespace {
+
+const double kLnRMax = std::log(200.0);
+constexpr double kLinearCurvature = 1e-3;
+
+template <class... F>
+struct Overload : F... {
+  using F::operator()...;
+};
+template <class... F>
+Overload(F...) -> Overload<F...>;
+
+}  // namespace
+
+std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputRange& r) {
+  const double R = std::max(r.umax - r.umin, 1e-9);
+  if (e.name == "stiction") {
+    if (e.variant == "he" || e.variant.empty())
+      return {{"fs", "%", 0.0, R}, {"fd/fs", "", 0.0, 1.0}};
+    if (e.variant == "kano" || e.variant == "choudhury")
+      return {{"S", "%", 0.0, R}, {"J/S", "", 0.0, 1.0}};
+    if (e.variant == "stenman") return {{"d", "%", 0.0, R}};
+    throw std::invalid_argument("stiction: unknown variant '" + e.variant + "'");
+  }
+  if (e.name == "deadband") return {{"d", "%", 0.0, R}};
+  if (e.name == "saturation")
+    return {{"lower", "%", r.umin, r.umax - R / 100}, {"upper share", "", 0.01, 1.0}};
+  if (e.name == "characteristic") {
+    if (e.variant == "auto" || e.variant.empty()) return {{"curvature", "", -kLnRMax, kLnRMax}};
+    return {{"ln R", "", kLinearCurvature, kLnRMax}};
+  }
+  if (e.name == "actuator-lag") return {{"tau", "s", 0.0, 60.0 * r.Ts}};
+  if (find_effect(e.name)) return {};
+  throw std::invalid_argument("unknown effect '" + e.name + "'");
+}
+
+ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputRange& r) {
+  if (e.name == "stiction") {
+    const double band = std::max(th[0], 0.0);
+    if (e.variant == "stenman") return StenmanStiction(band);
+    const double ratio = std::clamp(th[1], 0.0, 1.0);
+    if (e.variant == "kano") return KanoStiction(band, ratio * band);
+    if (e.variant == "choudhury") return ChoudhuryStiction(band, ratio * band);
+    return HeStiction(band, ratio * band);
+  }
+  if (e.name == "deadband") return Deadband(std::max(th[0], 0.0));
+  if (e.name == "saturation") {
+    // upper = lower + share (umax - lower): every lower < upper inside the OP range.
+    const double upper = th[0] + std::clamp(th[1], 0.01, 1.0) * (r.umax - th[0]);
+    return Saturation(th[0], std::max(upper, th[0] + 1e-9));
+  }
+  if (e.name == "characteristic") {
+    const bool fixed = !(e.variant == "auto" || e.variant.empty());
+    const double k = th[0];
+    if (!fixed && std::abs(k) < kLinearCurvature)
+      return Characteristic(Characteristic::Kind::linear, 2.0);
+    Characteristic::Kind kind =
+        k > 0 ? Characteristic::Kind::equal_percentage : Characteristic::Kind::quick_opening;
+    if (fixed) kind = characteristic_kind_from_string(e.variant);
+    return Characteristic(kind, std::exp(std::max(std::abs(k), kLinearCurvature)));
+  }
+  if (e.name == "actuator-lag") return ActuatorLag(std::max(th[0], 0.0), r.Ts);
+  throw std::invalid_argument("effect '" + e.name + "' has no valve block to search");
+}
+
+std::vector<NamedValue> block_parameters(const ValveEffect& block) {
+  return std::visit(Overload{[](const HeStiction& b) -> std::vector<NamedValue> {
+                               return {{"fs", b.fs(), "%"}, {"fd", b.fd(), "%"}};
+                             },
+                             [](const KanoStiction& b) -> std::vector<NamedValue> {
+                               return {{"S", b.S(), "%"}, {"J", b.J(), "%"}};
+                             },
+                             [](const ChoudhuryStiction& b) -> std::vector<NamedValue> {
+                               return {{"S", b.S(), "%"}, {"J", b.J(), "%"}};
+                             },
+                             [](const StenmanStiction& b) -> std::vector<NamedValue> {
+                               return {{"d", b.d(), "%"}};
+                             },
+                             [](const Deadband& b) -> std::vector<NamedValue> {
+                               return {{"d", b.d(), "%"}};
+                             },
+                             [](const Saturation& b) -> std::vector<NamedValue> {
+                               return {{"lower", b.lower(), "%"}, {"upper", b.upper(), "%"}};
+                             },
+                             [](const Characteristic& b) -> std::vector<NamedValue> {
+                               if (b.kind() == Characteristic::Kind::linear)
+                                 return {{"R", 1.0, ""}};
+                               return {{"R", b.rangeability(), ""}};
+                             },
+                             [](const ActuatorLag& b) -> std::vector<NamedValue> {
+                               return {{"tau", b.tau(), "s"}};
+                             },
+                             [](const auto&) -> std::vector<NamedValue> { return {}; }},
+                    block);
+}
+
+}  // namespace valvediag

@@ -1,0 +1,297 @@
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <stdexcept>
+
+#include "valvediag/model_fit.hpp"
+#include "valvediag/scenarios.hpp"
+
+using namespace valvediag;
+
+namespace {
+
+LoopData scenario_data(const std::string& name, std::uint64_t seed) {
+  return run_scenario(scenario_by_name(name), seed, 0);
+}
+
+double param(const ModelFit& f, const std::string& effect, const std::string& name) {
+  for (const auto& e : f.effects)
+    if (e.name == effect)
+      for (const auto& p : e.parameters)
+        if (p.name == name) return p.value;
+  return std::nan("");
+}
+
+ModelFit fit(const LoopData& d, const std::string& spec, ModelFitOptions opt = {}) {
+  return fit_model(d.op, d.pv, d.sample_period(), parse_model_spec(spec), opt);
+}
+
+ModelFitOptions split(double fraction = 0.3) {
+  ModelFitOptions o;
+  o.validation_fraction = fraction;
+  return o;
+}
+
+// The reference loop of the valve scenarios with a given valve and noise.
+LoopData custom_loop(std::vector<ValveEffect> valve, double noise, bool load_noise,
+                     std::uint64_t seed, double dead_time = 4.0) {
+  Scenario s = scenario_by_name("linear-clean");
+  s.loop.valve = std::move(valve);
+  s.loop.measurement_noise_std = noise;
+  s.loop.disturbances.steps.clear();
+  if (!load_noise) s.loop.disturbances.noises.clear();
+  s.loop.process.dead_time = dead_time;
+  return run_scenario(s, seed, 3000);
+}
+
+void show(const ModelFit& f) {
+  std::string p;
+  for (const auto& e : f.effects)
+    for (const auto& v : e.parameters)
+      p += " " + e.name + "." + v.name + "=" + std::to_string(v.value);
+  MESSAGE(to_string(f.spec) << " (" << f.structure.na << "," << f.structure.nb << ","
+                            << f.structure.nk << ") est " << f.fitness_percent << " val "
+                            << f.validation_fitness_percent << ", " << f.evaluations << " evals, "
+                            << f.elapsed_s << " s," << p);
+}
+
+}  // namespace
+
+TEST_CASE("linear model: x = u, ARX by least squares, fitness as the core defines it") {
+  const LoopData d = scenario_data("paper-ex1-linear", 1);
+  const ModelFit f = fit(d, "linear", split());
+  show(f);
+  CHECK(f.status == ModelFitStatus::Converged);
+  CHECK(f.effects.empty());
+  CHECK(f.x_hat == d.op);
+  CHECK(f.estimation_end == 2100);
+  CHECK(f.fitness_percent > 90.0);
+  CHECK(f.validation_fitness_percent > 80.0);
+  CHECK(is_stable(f.a));
+  CHECK(f.fitness_percent ==
+        doctest::Approx(fitness_percent(d.pv, f.y_sim, f.first_sample, f.estimation_end)));
+  // The same model driven again reproduces its own simulation.
+  const auto again = simulate_model(f, d.op, d.pv);
+  for (std::size_t t = 0; t < d.size(); t += 97) CHECK(again[t] == doctest::Approx(f.y_sim[t]));
+}
+
+TEST_CASE("impossible problems throw; options are checked") {
+  const LoopData d = scenario_data("paper-ex1", 1);
+  const ModelSpec st = parse_model_spec("stiction");
+  std::vector<double> shorter(d.op.begin(), d.op.end() - 1);
+  CHECK_THROWS_AS(fit_model(shorter, d.pv, 0.5, st), std::invalid_argument);
+  CHECK_THROWS_AS(fit_model(std::vector<double>(d.size(), 50.0), d.pv, 0.5, st),
+                  std::invalid_argument);
+  CHECK_THROWS_AS(fit_model(d.op, d.pv, 0.0, st), std::invalid_argument);
+  std::vector<double> few(d.op.begin(), d.op.begin() + 40), fewy(d.pv.begin(), d.pv.begin() + 40);
+  CHECK_THROWS_AS(fit_model(few, fewy, 0.5, st), std::invalid_argument);
+  ModelFitOptions bad;
+  bad.validation_fraction = 0.95;
+  CHECK_THROWS_AS(fit_model(d.op, d.pv, 0.5, st, bad), std::invalid_argument);
+  std::vector<double> nan_pv = d.pv;
+  nan_pv[10] = std::nan("");
+  CHECK_THROWS_AS(fit_model(d.op, nan_pv, 0.5, st), std::invalid_argument);
+}
+
+TEST_CASE("He stiction: fs, fd recovered by separable least squares (paper Example 1)") {
+  const LoopData d = scenario_data("paper-ex1", 1);
+  const ModelFit f = fit(d, "stiction", split());
+  show(f);
+  CHECK(f.effects[0].variant == "he");
+  CHECK(param(f, "stiction", "fs") == doctest::Approx(8.4).epsilon(0.2));
+  CHECK(param(f, "stiction", "fd") == doctest::Approx(3.5243).epsilon(0.2));
+  CHECK(f.fitness_percent > 95.0);
+  const ModelFit lin = fit(d, "linear", split());
+  show(lin);
+  CHECK(f.validation_fitness_percent > lin.validation_fitness_percent + 20.0);
+  REQUIRE(f.valve.size() == 1);
+  CHECK(std::holds_alternative<HeStiction>(f.valve[0]));
+  const auto again = simulate_model(f, d.op, d.pv);
+  for (std::size_t t = 0; t < d.size(); t += 97) CHECK(again[t] == doctest::Approx(f.y_sim[t]));
+}
+
+TEST_CASE("He stiction on other loops, bands and noise") {
+  struct Case {
+    double fs, fd, noise;
+    bool load_noise;
+    std::uint64_t seed;
+  };
+  for (const Case c : {Case{5.0, 2.0, 0.1, false, 7}, Case{3.0, 1.0, 0.3, true, 8}}) {
+    CAPTURE(c.fs);
+    CAPTURE(c.fd);
+    const LoopData d = custom_loop({HeStiction(c.fs, c.fd)}, c.noise, c.load_noise, c.seed);
+    const ModelFit f = fit(d, "stiction", split());
+    show(f);
+    const double fs = param(f, "stiction", "fs"), fd = param(f, "stiction", "fd");
+    CHECK(std::abs(fs - c.fs) <= std::max(0.2 * c.fs, 0.5));
+    CHECK(std::abs(fd - c.fd) <= std::max(0.2 * c.fd, 0.5));
+  }
+}
+
+TEST_CASE("Kano, Stenman and deadband bands; the true effect raises validation fitness") {
+  {
+    const LoopData d = scenario_data("kano", 1);
+    const ModelFit f = fit(d, "stiction:kano", split());
+    const ModelFit lin = fit(d, "linear", split());
+    show(f);
+    show(lin);
+    CHECK(f.effects[0].variant == "kano");
+    CHECK(param(f, "stiction", "S") == doctest::Approx(5.0).epsilon(0.1));
+    // J (true 2) is weakly determined by this limit cycle: only its ordering is asserted.
+    CHECK(param(f, "stiction", "J") < param(f, "stiction", "S"));
+    CHECK(f.validation_fitness_percent > lin.validation_fitness_percent + 20.0);
+  }
+  {
+    const LoopData d = scenario_data("stenman", 1);
+    const ModelFit f = fit(d, "stiction:stenman", split());
+    const ModelFit lin = fit(d, "linear", split());
+    show(f);
+    CHECK(param(f, "stiction", "d") == doctest::Approx(3.0).epsilon(0.1));
+    CHECK(f.validation_fitness_percent > lin.validation_fitness_percent + 15.0);
+  }
+  {
+    const LoopData d = scenario_data("deadband", 1);
+    const ModelFit f = fit(d, "deadband", split());
+    const ModelFit lin = fit(d, "linear", split());
+    show(f);
+    CHECK(param(f, "deadband", "d") == doctest::Approx(4.0).epsilon(0.15));
+    CHECK(f.validation_fitness_percent > lin.validation_fitness_percent + 20.0);
+  }
+}
+
+TEST_CASE("saturation limit and characteristic rangeability") {
+  {
+    const LoopData d = scenario_data("saturation", 1);
+    const ModelFit f = fit(d, "saturation", split());
+    const ModelFit lin = fit(d, "linear", split());
+    show(f);
+    show(lin);
+    CHECK(param(f, "saturation", "upper") == doctest::Approx(70.0).epsilon(0.02));
+    // OP never goes near the true lower limit (5 %): the fit must not invent one inside the data.
+    const double op_min = *std::min_element(d.op.begin(), d.op.begin() + 2100);
+    CHECK(param(f, "saturation", "lower") <= op_min + 1.0);
+    CHECK(f.validation_fitness_percent > lin.validation_fitness_percent + 15.0);
+  }
+  {
+    const LoopData d = scenario_data("characteristic", 1);
+    const ModelFit f = fit(d, "characteristic", split());
+    const ModelFit lin = fit(d, "linear", split());
+    show(f);
+    CHECK(f.effects[0].variant == "equal-percentage");
+    CHECK(param(f, "characteristic", "R") == doctest::Approx(50.0).epsilon(0.25));
+    CHECK(f.validation_fitness_percent > lin.validation_fitness_percent + 20.0);
+  }
+}
+
+TEST_CASE("actuator lag: tau and the process lag as a pair") {
+  // A lag before a linear process is a second pole the ARX part could carry as well: with a
+  // first-order ARX the two time constants are recovered, but which is which is not identifiable.
+  const LoopData d = scenario_data("actuator-lag", 1);
+  ModelFitOptions o = split();
+  o.structure.na_max = 1;
+  o.structure.nb_max = 1;
+  const ModelFit f = fit(d, "actuator-lag", o);
+  const ModelFit lin = fit(d, "linear", o);
+  show(f);
+  const double tau = param(f, "actuator-lag", "tau");
+  const double tau_p = -d.sample_period() / std::log(-f.a[0]);
+  CHECK(std::min(tau, tau_p) == doctest::Approx(15.0).epsilon(0.2));
+  CHECK(std::max(tau, tau_p) == doctest::Approx(40.0).epsilon(0.2));
+  CHECK(f.fitness_percent > lin.fitness_percent + 1.5);
+}
+
+TEST_CASE("stiction + saturation are fitted jointly") {
+  const LoopData d = custom_loop({HeStiction(5.0, 2.0), Saturation(0.0, 52.0)}, 0.1, false, 10);
+  const ModelFit f = fit(d, "stiction+saturation", split());
+  show(f);
+  CHECK(param(f, "saturation", "upper") == doctest::Approx(52.0).epsilon(0.03));
+  CHECK(std::abs(param(f, "stiction", "fd") - 2.0) <= 1.0);
+  // fs (true 5) comes out near 3 here: with the valve pinned at its limit for long stretches the
+  // stick-slip is excited less; the joint model must still beat stiction alone.
+  const ModelFit st = fit(d, "stiction", split());
+  show(st);
+  CHECK(f.fitness_percent > st.fitness_percent + 2.0);
+  REQUIRE(f.valve.size() == 2);
+  CHECK(std::holds_alternative<Saturation>(f.valve[1]));
+}
+
+TEST_CASE("process effects: delay and order widen the structure grid") {
+  const LoopData d = custom_loop({}, 0.1, true, 11, 20.0);
+  const ModelFit lin = fit(d, "linear", split());
+  const ModelFit del = fit(d, "delay", split());
+  show(lin);
+  show(del);
+  CHECK(lin.structure.nk <= 10);
+  CHECK(param(del, "delay", "nk") == doctest::Approx(19.5).epsilon(0.05));
+  CHECK(param(del, "delay", "dead_time") == doctest::Approx(param(del, "delay", "nk") * 1.0));
+  CHECK(del.validation_fitness_percent > lin.validation_fitness_percent + 5.0);
+  const ModelFit ord = fit(d, "order", split());
+  CHECK(ord.fitness_percent >= lin.fitness_percent - 0.2);  // a wider grid never fits worse
+}
+
+TEST_CASE("integrator and disturbance forms") {
+  const LoopData d = scenario_data("integrating", 1);
+  const ModelFit lin = fit(d, "linear");
+  CHECK(lin.status == ModelFitStatus::NoStableModel);  // drift makes every ARX fit unstable
+  CHECK(std::isnan(lin.fitness_percent));
+  const ModelFit dist = fit(d, "disturbance");
+  const ModelFit both = fit(d, "integrator+disturbance");
+  show(lin);
+  show(dist);
+  show(both);
+  CHECK(both.integrating);
+  // The level loop: K = 0.01 PV/s per % of valve.
+  CHECK(param(both, "integrator", "rate_gain") == doctest::Approx(0.01).epsilon(0.15));
+  CHECK(both.fitness_percent > 90.0);
+  CHECK(both.disturbance.size() == d.size());
+}
+
+TEST_CASE("paper comparison: Preisach vs He vs Kano on simulated loops") {
+  // Asymmetric (position-dependent) stiction, as the paper's Examples 2 and 4: validation on a
+  // separate record of the same loop (another noise seed), as in Example 4.
+  double pre = 0, he = 0, kano = 0;
+  for (std::uint64_t seed : {1, 2, 3}) {
+    const LoopData d = scenario_data("asymmetric-stiction", seed);
+    const LoopData v = scenario_data("asymmetric-stiction", seed + 100);
+    ModelFitOptions o;
+    o.preisach_L_min = 10;
+    o.preisach_L_max = 24;
+    auto val = [&](const ModelFit& f) {
+      return fitness_percent(v.pv, simulate_model(f, v.op, v.pv), f.first_sample, v.size());
+    };
+    const ModelFit p = fit(d, "preisach", o), h = fit(d, "stiction", o),
+                   k = fit(d, "stiction:kano", o);
+    MESSAGE("seed " << seed << ": preisach " << p.fitness_percent << " / " << val(p) << ", he "
+                    << h.fitness_percent << " / " << val(h) << ", kano " << k.fitness_percent
+                    << " / " << val(k) << " (estimation / validation)");
+    CHECK(p.fitness_percent > h.fitness_percent);
+    CHECK(p.fitness_percent > k.fitness_percent);
+    pre += val(p) / 3;
+    he += val(h) / 3;
+    kano += val(k) / 3;
+  }
+  CHECK(pre > he + 1.5);
+  CHECK(pre > kano + 1.5);
+  // Plain He stiction (Example 3's finding): both fit about equally.
+  const LoopData d = scenario_data("paper-ex1", 1);
+  ModelFitOptions o;
+  o.preisach_L_min = 10;
+  o.preisach_L_max = 24;
+  const ModelFit p = fit(d, "preisach", o), h = fit(d, "stiction", o);
+  show(p);
+  show(h);
+  CHECK(std::abs(p.fitness_percent - h.fitness_percent) < 3.0);
+}
+
+TEST_CASE("fit_models runs independent fits in parallel with the same results") {
+  const LoopData d = scenario_data("stenman", 2);
+  const std::vector<ModelSpec> specs = {parse_model_spec("linear"), parse_model_spec("deadband"),
+                                        parse_model_spec("stiction:stenman")};
+  const auto many = fit_models(d.op, d.pv, 1.0, specs, split());
+  REQUIRE(many.size() == 3);
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    const ModelFit one = fit(d, to_string(specs[k]), split());
+    CHECK(many[k].spec == specs[k]);
+    CHECK(many[k].fitness_percent == doctest::Approx(one.fitness_percent).epsilon(1e-6));
+  }
+}
