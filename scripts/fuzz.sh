@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets in build-fuzz (clang, ASan + UBSan) and runs each for a bounded
 # time: FUZZ_SECONDS (default 60) per target. Crash inputs are copied to
-# test/fuzz/regressions/<corpus>/, where test_io replays them; the script then fails.
+# test/fuzz/regressions/<corpus>/, where test_io (csv) and test_bus (site_config, dbc, codec)
+# replay them; the script then fails.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 seconds=${FUZZ_SECONDS:-60}
@@ -13,7 +14,7 @@ CC=clang CXX=clang++ cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebI
   -DVALVEDIAG_FUZZ=ON -DVALVEDIAG_TESTS=OFF >/dev/null
 
 # target:corpus pairs; the corpus names a folder under test/fuzz/corpus and test/fuzz/regressions.
-targets=(fuzz_csv:csv)
+targets=(fuzz_csv:csv fuzz_site_config:site_config fuzz_dbc:dbc fuzz_codec:codec)
 
 status=0
 for pair in "${targets[@]}"; do

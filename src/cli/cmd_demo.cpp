@@ -1,44 +1,142 @@
+// The main job end to end through the bus: a simulated PLC serves the paper's Example 1 loop
+// (sticky valve) over Modbus TCP on a free loopback port, the recorder records it through the
+// real Modbus driver at accelerated speed, the recording is exported and fitted.
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
+#include <thread>
 
 #include "commands.hpp"
 #include "fit_runner.hpp"
+#include "valvediag/bus_factory.hpp"
+#include "valvediag/csv_writer.hpp"
+#include "valvediag/recorder.hpp"
 #include "valvediag/scenarios.hpp"
+#include "valvediag/sim_plc.hpp"
 
 namespace valvediag::cli {
+
+namespace {
+
+// The embedded site: one loop, the paper's Example 1, as FLOAT32 holding registers 0..7.
+SiteConfig demo_site(std::uint64_t seed, double period_s) {
+  const std::string toml =
+      "[[bus]]\nname = \"demo-plc\"\nprotocol = \"modbus-tcp\"\n"
+      "controller = \"tcp://127.0.0.1:0\"\ntimeout = \"200ms\"\nretries = 1\n"
+      "reconnect_max = \"200ms\"\n"
+      "[[loop]]\nname = \"FIC101\"\nbus = \"demo-plc\"\nsimulate = \"paper-ex1\"\nseed = " +
+      std::to_string(seed) +
+      "\nsample_period = 1\n"
+      "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
+      "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\n"
+      "sp = { register = \"holding\", address = 4, type = \"FLOAT32\" }\n"
+      "mv = { register = \"holding\", address = 6, type = \"FLOAT32\" }\n";
+  SiteConfig site = parse_site_config(toml, "demo site (embedded)");
+  site.loops[0].sample_period_s = period_s;  // below the 1 ms a file may give at high speed
+  return site;
+}
+
+void print_comparison(const FitRun& run) {
+  const auto& st = run.result.best.structure;
+  std::printf("%-22s %-28s %s\n", "", "structure (na, nb, nk, L)", "fitness");
+  std::printf("%-22s %-28s %.2f %%\n", "paper (Example 1)", "(1, 1, 5, 16)", 94.69);
+  char ours[64];
+  std::snprintf(ours, sizeof ours, "(%d, %d, %d, %d)", st.na, st.nb, st.nk, st.L);
+  std::printf("%-22s %-28s %.2f %%   in %.2f s\n", "valvediag", ours, run.result.fitness_percent,
+              run.result.elapsed_s);
+}
+
+}  // namespace
 
 void add_demo(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
       "demo",
-      "Simulate the paper's Example 1 (PI loop, He stiction), identify it, compare with the paper");
-  cmd->footer("Example:\n  valvediag demo\n  valvediag demo --seed 7 --json ex1.json");
+      "The whole story: a simulated PLC with a sticky valve loop, recorded over Modbus TCP, "
+      "fitted, compared with the paper");
+  cmd->footer(
+      "Examples:\n  valvediag demo\n  valvediag demo --out-dir /tmp/vd --speed 200\n"
+      "  valvediag demo --offline      (no bus: simulate and fit directly)");
   struct Args {
     std::uint64_t seed = 1;
     std::string json;
+    std::string out_dir = "valvediag-demo";
+    double speed = 100.0;
+    std::size_t samples = 3000;
+    bool offline = false;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("--seed", a->seed, "random seed of the simulation")->capture_default_str();
-  cmd->add_option("--json", a->json, "also write the fit result as JSON");
+  cmd->add_option("--json", a->json, "also write the fit result as JSON to this file");
+  cmd->add_option("--out-dir", a->out_dir, "where the recording, CSV and model go")
+      ->capture_default_str();
+  cmd->add_option("--speed", a->speed, "simulated seconds per real second (10..500)")
+      ->check(CLI::Range(10.0, 500.0))
+      ->capture_default_str();
+  cmd->add_option("--samples", a->samples, "samples to record (Ts 0.5 s)")
+      ->check(CLI::Range(600, 20000))
+      ->capture_default_str();
+  cmd->add_flag("--offline", a->offline, "simulate and fit without the bus (the quick check)");
   cmd->callback([a, &exit_code] {
     const Scenario s = scenario_by_name("paper-ex1");
-    std::cout << "Simulating scenario 'paper-ex1': " << s.description << "\n";
-    const LoopData d = run_scenario(s, a->seed, 0);
+    LoopData d;
+    std::string json_path = a->json;
+    if (a->offline) {
+      std::cout << "Simulating scenario 'paper-ex1': " << s.description << "\n";
+      d = run_scenario(s, a->seed, a->samples);
+    } else {
+      namespace fs = std::filesystem;
+      fs::create_directories(a->out_dir);
+      const std::string db = (fs::path(a->out_dir) / "demo.sqlite").string();
+      for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
+      const double Ts = s.loop.Ts, period = Ts / a->speed;
+      SiteConfig site = demo_site(a->seed, period);
+      SimPlc plc(site, SimPlcOptions{a->speed, 0});
+      plc.start();
+      std::cout << "1. simulated PLC on 127.0.0.1:" << plc.port()
+                << ": loop FIC101 = " << s.description << ", running " << a->speed
+                << "x real time\n";
+      // Poll half a PLC cycle after its steps, so every read sees exactly one new sample.
+      std::this_thread::sleep_for(std::chrono::duration<double>(period / 2));
+      RecorderOptions o;
+      o.db_path = db;
+      o.duration_s = static_cast<double>(a->samples) * period;
+      std::cout << "2. recording " << a->samples << " samples (" << a->samples * Ts
+                << " s of plant time) through the Modbus TCP driver, every " << period * 1e3
+                << " ms ..." << std::flush;
+      for (auto& b : site.buses) b.port = plc.port();
+      Recorder rec(site, o, make_bus);
+      std::atomic<bool> stop{false};
+      const RecorderStatus st = rec.run(stop);
+      plc.stop();
+      std::cout << " done in " << st.elapsed_s << " s\n" << recorder_summary(st, db, rec.run_id());
+      if (plc.write_requests() != 0)
+        throw std::runtime_error("the demo sent a write request: this is a bug");
+      // Ticks the recorder missed (a loaded machine) are gaps: fit the longest clean stretch.
+      RecordedLoop r = read_recorded_loop(db, "FIC101", std::nullopt, std::nullopt, 0, true);
+      for (const auto& n : r.notes) std::cout << "note: " << n << "\n";
+      if (r.data.size() < a->samples / 2)
+        throw std::runtime_error("only " + std::to_string(r.data.size()) +
+                                 " consecutive good samples were recorded (machine overloaded?); "
+                                 "try a lower --speed, e.g. --speed 50");
+      d = std::move(r.data);
+      for (double& t : d.t) t *= a->speed;  // back to plant seconds
+      d.source = db + " loop FIC101 (recorded over Modbus TCP, t in plant seconds)";
+      const std::string csv = (fs::path(a->out_dir) / "fic101.csv").string();
+      write_loop_csv(csv, d);
+      std::cout << "3. exported " << csv << "\n";
+      if (json_path.empty()) json_path = (fs::path(a->out_dir) / "model.json").string();
+    }
     std::cout
         << "Identifying over the paper's full grid (na <= 3, nb <= 3, nk <= 10, L <= 20) ...\n\n";
     FitOptions fo;
     FitRun run = run_fit(d, fo, "pv");
     std::cout << run.summary << "\n";
-    const auto& st = run.result.best.structure;
-    std::printf("%-22s %-28s %s\n", "", "structure (na, nb, nk, L)", "fitness");
-    std::printf("%-22s %-28s %.2f %%\n", "paper (Example 1)", "(1, 1, 5, 16)", 94.69);
-    char ours[64];
-    std::snprintf(ours, sizeof ours, "(%d, %d, %d, %d)", st.na, st.nb, st.nk, st.L);
-    std::printf("%-22s %-28s %.2f %%   in %.2f s\n", "valvediag", ours, run.result.fitness_percent,
-                run.result.elapsed_s);
-    if (!a->json.empty()) {
-      write_text(a->json, run.json.dump(2) + "\n");
-      std::cout << "wrote " << a->json << "\n";
+    print_comparison(run);
+    // Seam: diagnosis and the report come with their own issue; they take `run` and `d` here.
+    if (!json_path.empty()) {
+      write_text(json_path, run.json.dump(2) + "\n");
+      std::cout << "wrote " << json_path << "\n";
     }
     exit_code = run.result.status == IdentificationStatus::Ok ? kOk : kNoModel;
   });

@@ -26,6 +26,7 @@ struct FitArgs {
   std::string select_on = "estimation";
   std::string json, series;
   bool no_merge = false;
+  std::string db, loop, from, to;  // a recorded loop instead of a CSV file
 };
 
 // "0.3": the last 30 % held out; "t=600" or "600s": samples from t >= 600 s held out;
@@ -84,6 +85,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->footer(
       "Examples:\n"
       "  valvediag fit loop.csv --json model.json --series-out series.csv\n"
+      "  valvediag fit --db site.sqlite --loop FIC101 --from 600   (a recorded loop)\n"
       "  valvediag fit loop.csv --validate 0.3 --select-on validation\n"
       "  valvediag fit export.txt --delimiter tab --skip-lines 2 --skip-after-header 2 \\\n"
       "      --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV'   "
@@ -93,8 +95,13 @@ void add_fit(CLI::App& app, int& exit_code) {
       "  valvediag fit loop.csv --method alternation --stop parameter --normalization paper-sign   "
       "(the paper)");
   auto a = std::make_shared<FitArgs>();
-  cmd->add_option("data", a->data, "CSV file with columns t, op, pv (optional sp, mv)")->required();
+  cmd->add_option("data", a->data, "CSV file with columns t, op, pv (optional sp, mv)");
   auto* g_in = "Input";
+  cmd->add_option("--db", a->db, "a recording (valvediag record) instead of a CSV file")
+      ->group(g_in);
+  cmd->add_option("--loop", a->loop, "the recorded loop to fit (with --db)")->group(g_in);
+  cmd->add_option("--from", a->from, "with --db: start, s from the recording's start")->group(g_in);
+  cmd->add_option("--to", a->to, "with --db: end, s from the recording's start")->group(g_in);
   cmd->add_option("--t", a->csv.t_column,
                   "time column name or 1-based index ('none': no time column)")
       ->group(g_in)
@@ -209,7 +216,18 @@ void add_fit(CLI::App& app, int& exit_code) {
     a->csv.decimal = a->decimal[0];
     std::vector<std::string> notes;
     if (a->output == "mv" && a->csv.mv_column.empty()) a->csv.mv_column = "mv";
-    LoopData d = read_loop_csv(a->data, a->csv, &notes);
+    if (a->data.empty() == a->db.empty())
+      throw UsageError("give a CSV file or --db site.sqlite --loop NAME (one of them)");
+    if (a->db.empty() && (!a->loop.empty() || !a->from.empty() || !a->to.empty()))
+      throw UsageError("--loop, --from and --to go with --db");
+    LoopData d;
+    if (a->db.empty()) {
+      d = read_loop_csv(a->data, a->csv, &notes);
+    } else {
+      RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to);
+      notes = r.notes;
+      d = std::move(r.data);
+    }
     FitOptions& fo = a->fit;
     fo.method = a->method == "joint" ? FitMethod::Joint : FitMethod::Alternation;
     fo.stop_rule = a->stop == "cost" ? StopRule::CostDecrease : StopRule::ParameterChange;
@@ -224,7 +242,7 @@ void add_fit(CLI::App& app, int& exit_code) {
     if (fo.select_on_validation && a->validate.empty())
       throw UsageError("--select-on validation needs --validate (a fraction or a start time)");
     if (fo.block == LinearBlock::Identity && !d.has_mv())
-      throw UsageError(a->data +
+      throw UsageError((a->data.empty() ? a->db : a->data) +
                        ": --output mv needs a valve position column (name it with --mv COLUMN)");
     if (auto msg = validate(fo); !msg.empty()) throw UsageError(msg);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";

@@ -6,10 +6,18 @@
 #include <stdexcept>
 #include <string>
 
+#include "valvediag/recorder.hpp"
+
 namespace valvediag::cli {
 
 // Exit statuses: findings and poor fits are results (0); these are the failures.
-enum ExitCode : int { kOk = 0, kFailure = 1, kBadInput = 2, kNoModel = 3 };
+enum ExitCode : int {
+  kOk = 0,
+  kFailure = 1,
+  kBadInput = 2,
+  kNoModel = 3,
+  kRecordedWithErrors = 4  // record: data stored, but some ticks had communication errors
+};
 
 // A user error found by a command (bad option combination, bad value): exit status 2.
 struct UsageError : std::runtime_error {
@@ -19,5 +27,15 @@ struct UsageError : std::runtime_error {
 void add_fit(CLI::App& app, int& exit_code);
 void add_simulate(CLI::App& app, int& exit_code);
 void add_demo(CLI::App& app, int& exit_code);
+void add_sim_plc(CLI::App& app, int& exit_code);
+void add_record(CLI::App& app, int& exit_code);
+void add_export(CLI::App& app, int& exit_code);
+
+// A loop read from a recording (--db/--loop of export and fit); --from/--to in seconds. Gaps and
+// unknown names are UsageErrors (exit status 2).
+RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const std::string& from,
+                          const std::string& to, std::int64_t run = 0);
+// The recorder's end-of-run summary (record and demo).
+std::string recorder_summary(const RecorderStatus& s, const std::string& db, std::int64_t run);
 
 }  // namespace valvediag::cli

@@ -6,6 +6,7 @@
 #include "commands.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/scenarios.hpp"
+#include "valvediag/site_config.hpp"
 
 int main(int argc, char** argv) {
   using namespace valvediag::cli;
@@ -19,6 +20,9 @@ int main(int argc, char** argv) {
   add_demo(app, code);
   add_fit(app, code);
   add_simulate(app, code);
+  add_sim_plc(app, code);
+  add_record(app, code);
+  add_export(app, code);
   auto* help = app.add_subcommand("help", "List the commands, or explain one: valvediag help fit");
   std::string topic;
   help->add_option("command", topic, "command to explain");
@@ -49,6 +53,9 @@ int main(int argc, char** argv) {
     std::cerr << "error: " << e.what() << "\n";
     return kBadInput;
   } catch (const valvediag::ScenarioFileError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kBadInput;
+  } catch (const valvediag::SiteConfigError& e) {
     std::cerr << "error: " << e.what() << "\n";
     return kBadInput;
   } catch (const UsageError& e) {

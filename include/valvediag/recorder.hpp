@@ -1,0 +1,126 @@
+// The recorder: polls every loop of a site at its sample period on a monotonic clock through the
+// bus interface and stores one row per sample tick per loop in SQLite (WAL mode, one transaction
+// per commit interval, so a kill -9 loses at most that interval and leaves an intact database).
+// Each value carries a quality flag; gaps are marked, never filled. Reads only.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "valvediag/bus.hpp"
+#include "valvediag/loop_data.hpp"
+#include "valvediag/site_config.hpp"
+
+namespace valvediag {
+
+// One stored sample tick of one loop.
+struct SampleRow {
+  std::int64_t loop_id = 0;
+  std::int64_t tick = 0;  // t = tick * sample period since the run's start
+  double wall = 0.0;      // Unix time of the read, s
+  double lateness = 0.0;  // read started this long after the tick's due time, s
+  std::array<PointValue, kPointCount> values;
+};
+
+// The SQLite file: schema, batched inserts, and reading a loop back. Throws std::runtime_error
+// naming the file and what to do on any SQLite failure.
+class RecordingDb {
+ public:
+  explicit RecordingDb(const std::string& path, bool create = true);
+  ~RecordingDb();
+  RecordingDb(const RecordingDb&) = delete;
+  RecordingDb& operator=(const RecordingDb&) = delete;
+
+  std::int64_t begin_run(const std::string& config_file);
+  void end_run(std::int64_t run, const std::string& status);
+  std::int64_t add_loop(std::int64_t run, const LoopConfigEntry& loop);
+  // All rows in one transaction.
+  void insert(const std::vector<SampleRow>& rows);
+  void add_gap(std::int64_t loop_id, std::int64_t first_tick, std::int64_t last_tick,
+               const std::string& reason);
+  std::string integrity_check();  // "ok" when intact
+  const std::string& path() const { return path_; }
+  struct Impl;
+
+ private:
+  std::string path_;
+  std::unique_ptr<Impl> impl_;
+};
+
+// A loop's recording read back for export and fitting.
+class RecordingGapError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+struct RecordedLoop {
+  LoopData data;  // t from the run's start (s); sp when every sp is good
+  std::int64_t run = 0;
+  double sample_period = 0.0;
+  std::size_t rows = 0;
+  std::vector<std::string> notes;  // e.g. "sp left out: 3 ticks without a good sp"
+};
+// Reads loop `name` of run `run` (0: the latest run that recorded it) from `from_s` to `to_s`
+// (seconds since the run's start; nullopt: all). Throws RecordingGapError when OP or PV is not
+// good on some tick in the range, listing the gaps and the longest clean stretch to ask for
+// instead; std::runtime_error when the file, loop or run does not exist.
+// With `longest_clean`, a range with gaps gives its longest clean stretch instead (with a note).
+RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
+                                std::optional<double> from_s = std::nullopt,
+                                std::optional<double> to_s = std::nullopt, std::int64_t run = 0,
+                                bool longest_clean = false);
+
+struct RecorderOptions {
+  std::string db_path;
+  std::vector<std::string> loops;    // names to record; empty: every loop of the site
+  std::optional<double> duration_s;  // stop after this long; nullopt: until stop is set
+  double commit_interval_s = 0.5;    // at most this much is lost on a kill -9
+  double status_interval_s = 1.0;
+};
+
+struct LoopCounts {
+  std::string name;
+  std::uint64_t rows = 0, good = 0, comm_error = 0, stale = 0, missed = 0, invalid = 0;
+  std::uint64_t gaps = 0;
+};
+
+struct RecorderStatus {
+  double elapsed_s = 0.0;
+  std::uint64_t rows = 0;       // rows produced
+  std::uint64_t committed = 0;  // rows in the database
+  std::uint64_t bad_rows = 0;   // rows with op or pv not good
+  std::uint64_t missed = 0;     // ticks the recorder could not poll in time
+  double lateness_p50_s = 0.0, lateness_p99_s = 0.0, lateness_max_s = 0.0;
+  std::vector<LoopCounts> loops;
+  std::vector<std::pair<std::string, BusStats>> buses;
+  std::string last_error;
+  bool errors() const { return bad_rows > 0 || missed > 0; }
+};
+
+using BusFactory =
+    std::function<std::unique_ptr<Bus>(const BusConfig&, std::vector<LoopConfigEntry>)>;
+
+class Recorder {
+ public:
+  // Checks the loop selection against the site and opens (creates) the database; throws
+  // std::invalid_argument for an unknown loop name, std::runtime_error for database problems.
+  // Nothing is sent on any bus before run().
+  Recorder(SiteConfig site, RecorderOptions options, BusFactory factory);
+  ~Recorder();
+  // Records until `stop` is set or the duration is over; calls `on_status` about every
+  // status_interval_s from the calling thread. Returns the final status (all rows committed).
+  RecorderStatus run(const std::atomic<bool>& stop,
+                     const std::function<void(const RecorderStatus&)>& on_status = {});
+  std::int64_t run_id() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace valvediag

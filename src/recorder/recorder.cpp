@@ -1,0 +1,313 @@
+// Polling threads (one per bus: a bus answers one request at a time) produce rows into a queue;
+// the calling thread commits the queue every commit interval and reports status.
+#include "valvediag/recorder.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <thread>
+
+namespace valvediag {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+
+double since(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+
+double wall_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  const auto k = static_cast<std::size_t>(std::min<double>(
+      static_cast<double>(v.size() - 1), std::floor(p * static_cast<double>(v.size() - 1) + 0.5)));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+struct PolledLoop {
+  LoopConfigEntry cfg;
+  std::int64_t db_id = 0;
+  std::size_t bus_index = 0;  // position on its bus
+  std::int64_t next_tick = 0;
+  std::int64_t end_tick = std::numeric_limits<std::int64_t>::max();  // exclusive
+  // Gap being tracked: first bad tick, or -1.
+  std::int64_t gap_start = -1, gap_last = -1;
+  std::string gap_reason;
+};
+
+struct BusWorker {
+  std::unique_ptr<Bus> bus;
+  std::vector<std::size_t> loops;  // indices into Impl::loops
+  std::thread thread;
+};
+}  // namespace
+
+struct Recorder::Impl {
+  SiteConfig site;
+  RecorderOptions opt;
+  BusFactory factory;
+  std::unique_ptr<RecordingDb> db;
+  std::int64_t run = 0;
+  std::vector<PolledLoop> loops;
+  std::vector<BusWorker> workers;
+
+  std::mutex mutex;  // queue, counts, lateness, gaps, last_error
+  std::vector<SampleRow> queue;
+  std::vector<LoopCounts> counts;
+  std::vector<double> lateness;
+  std::uint64_t rows = 0, committed = 0, bad_rows = 0, missed = 0;
+  double lateness_max = 0.0;
+  std::string last_error;
+  struct ClosedGap {
+    std::int64_t loop_id, a, b;
+    std::string reason;
+  };
+  std::vector<ClosedGap> closed_gaps;
+
+  // Under the mutex: counts and gap tracking for one finished row.
+  void account(PolledLoop& l, std::size_t li, const SampleRow& r, const std::string& error) {
+    LoopCounts& c = counts[li];
+    ++c.rows;
+    ++rows;
+    const Quality qo = r.values[0].quality, qp = r.values[1].quality;
+    const bool good = qo == Quality::good && qp == Quality::good;
+    for (std::size_t i = 0; i < 2; ++i) {
+      switch (r.values[i].quality) {
+        case Quality::good:
+          break;
+        case Quality::stale:
+          ++c.stale;
+          break;
+        case Quality::comm_error:
+          ++c.comm_error;
+          break;
+        case Quality::missed:
+          ++c.missed;
+          break;
+        case Quality::invalid:
+          ++c.invalid;
+          break;
+      }
+      if (r.values[i].quality != Quality::good) break;  // count a row once
+    }
+    if (good) {
+      ++c.good;
+      if (l.gap_start >= 0) {
+        closed_gaps.push_back({l.db_id, l.gap_start, l.gap_last, l.gap_reason});
+        ++c.gaps;
+        l.gap_start = -1;
+      }
+    } else {
+      ++bad_rows;
+      if (qo == Quality::missed) ++missed;
+      if (l.gap_start < 0) {
+        l.gap_start = r.tick;
+        l.gap_reason = error.empty() ? to_string(qo != Quality::good ? qo : qp) : error;
+      }
+      l.gap_last = r.tick;
+      if (!error.empty()) last_error = l.cfg.name + ": " + error;
+    }
+    queue.push_back(r);
+  }
+
+  void poll(BusWorker& w, Clock::time_point t0, const std::atomic<bool>& stop,
+            const std::atomic<bool>& done) {
+    while (!stop.load() && !done.load()) {
+      // The loop due first (ties: the configured order).
+      PolledLoop* next = nullptr;
+      std::size_t next_li = 0;
+      Clock::time_point due = Clock::time_point::max();
+      for (std::size_t li : w.loops) {
+        PolledLoop& l = loops[li];
+        if (l.next_tick >= l.end_tick) continue;
+        const auto d =
+            t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
+                     static_cast<double>(l.next_tick) * l.cfg.sample_period_s));
+        if (d < due) {
+          due = d;
+          next = &l;
+          next_li = li;
+        }
+      }
+      if (!next) return;  // every loop reached the end of the duration
+      if (Clock::now() < due) {
+        // Sleep in slices so a stop request is seen within 50 ms.
+        std::this_thread::sleep_until(std::min(due, Clock::now() + std::chrono::milliseconds(50)));
+        continue;
+      }
+      PolledLoop& l = *next;
+      const auto start = Clock::now();
+      const double P = l.cfg.sample_period_s;
+      // The current tick; the ones skipped since the last poll are marked missed.
+      auto k_now = static_cast<std::int64_t>(std::floor(since(t0, start) / P));
+      k_now = std::min(std::max(k_now, l.next_tick), l.end_tick - 1);
+      std::unique_lock lock(mutex);
+      for (std::int64_t k = l.next_tick; k < k_now; ++k) {
+        SampleRow r;
+        r.loop_id = l.db_id;
+        r.tick = k;
+        r.wall = wall_now();
+        r.lateness = since(t0, start) - static_cast<double>(k) * P;
+        for (auto& v : r.values) v.quality = Quality::missed;
+        account(l, next_li, r, "recorder fell behind: tick not polled in time");
+      }
+      lock.unlock();
+      const LoopValues v = w.bus->read(l.bus_index);
+      lock.lock();
+      SampleRow r;
+      r.loop_id = l.db_id;
+      r.tick = k_now;
+      r.wall = wall_now();
+      // Lateness against the tick that was due, so that falling behind shows in the figures.
+      r.lateness = since(t0, start) - static_cast<double>(l.next_tick) * P;
+      r.values = v.points;
+      lateness.push_back(r.lateness);
+      lateness_max = std::max(lateness_max, r.lateness);
+      account(l, next_li, r, v.error);
+      l.next_tick = k_now + 1;
+    }
+  }
+
+  RecorderStatus status(double elapsed) {
+    std::lock_guard lock(mutex);
+    RecorderStatus s;
+    s.elapsed_s = elapsed;
+    s.rows = rows;
+    s.committed = committed;
+    s.bad_rows = bad_rows;
+    s.missed = missed;
+    s.lateness_p50_s = percentile(lateness, 0.5);
+    s.lateness_p99_s = percentile(lateness, 0.99);
+    s.lateness_max_s = lateness_max;
+    s.loops = counts;
+    s.last_error = last_error;
+    for (const auto& w : workers) s.buses.emplace_back(w.bus->name(), w.bus->stats());
+    return s;
+  }
+
+  void commit() {
+    std::vector<SampleRow> batch;
+    std::vector<ClosedGap> gaps;
+    {
+      std::lock_guard lock(mutex);
+      batch.swap(queue);
+      gaps.swap(closed_gaps);
+    }
+    db->insert(batch);
+    for (const auto& g : gaps) db->add_gap(g.loop_id, g.a, g.b, g.reason);
+    std::lock_guard lock(mutex);
+    committed += batch.size();
+  }
+};
+
+Recorder::Recorder(SiteConfig site, RecorderOptions options, BusFactory factory)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.site = std::move(site);
+  m.opt = std::move(options);
+  m.factory = std::move(factory);
+  for (const auto& name : m.opt.loops)
+    if (!m.site.find_loop(name)) {
+      std::string known;
+      for (const auto& l : m.site.loops) known += (known.empty() ? "" : ", ") + l.name;
+      throw std::invalid_argument("--loops: no loop '" + name + "' in " + m.site.file +
+                                  " (loops: " + known + ")");
+    }
+  if (m.opt.duration_s && !(*m.opt.duration_s > 0))
+    throw std::invalid_argument("the duration must be positive");
+  for (const auto& l : m.site.loops) {
+    if (!m.opt.loops.empty() &&
+        std::find(m.opt.loops.begin(), m.opt.loops.end(), l.name) == m.opt.loops.end())
+      continue;
+    PolledLoop p;
+    p.cfg = l;
+    if (m.opt.duration_s)
+      p.end_tick =
+          static_cast<std::int64_t>(std::ceil(*m.opt.duration_s / l.sample_period_s - 1e-9));
+    m.loops.push_back(std::move(p));
+    LoopCounts c;
+    c.name = l.name;
+    m.counts.push_back(c);
+  }
+  m.db = std::make_unique<RecordingDb>(m.opt.db_path);
+}
+
+Recorder::~Recorder() = default;
+
+std::int64_t Recorder::run_id() const {
+  return impl_->run;
+}
+
+RecorderStatus Recorder::run(const std::atomic<bool>& stop,
+                             const std::function<void(const RecorderStatus&)>& on_status) {
+  Impl& m = *impl_;
+  // Buses first: a bus that cannot exist at all (no SocketCAN) fails before anything is stored.
+  for (const auto& b : m.site.buses) {
+    BusWorker w;
+    std::vector<LoopConfigEntry> on_bus;
+    for (std::size_t i = 0; i < m.loops.size(); ++i)
+      if (m.loops[i].cfg.bus == b.name) {
+        m.loops[i].bus_index = on_bus.size();
+        on_bus.push_back(m.loops[i].cfg);
+        w.loops.push_back(i);
+      }
+    if (on_bus.empty()) continue;
+    w.bus = m.factory(b, on_bus);
+    m.workers.push_back(std::move(w));
+  }
+  m.run = m.db->begin_run(m.site.file);
+  for (auto& l : m.loops) l.db_id = m.db->add_loop(m.run, l.cfg);
+
+  std::atomic<bool> done{false};
+  const auto t0 = Clock::now();
+  std::atomic<int> running{static_cast<int>(m.workers.size())};
+  for (auto& w : m.workers)
+    w.thread = std::thread([&m, &w, t0, &stop, &done, &running] {
+      m.poll(w, t0, stop, done);
+      --running;
+    });
+  auto last_commit = t0, last_status = t0;
+  std::string failure;
+  while (running.load() > 0) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    const auto now = Clock::now();
+    if (since(last_commit, now) >= m.opt.commit_interval_s) {
+      try {
+        m.commit();
+      } catch (const std::exception& e) {
+        failure = e.what();  // a full disk: stop, nothing more can be kept
+        done = true;
+        break;
+      }
+      last_commit = now;
+    }
+    if (on_status && since(last_status, now) >= m.opt.status_interval_s) {
+      on_status(m.status(since(t0, now)));
+      last_status = now;
+    }
+  }
+  done = true;
+  for (auto& w : m.workers)
+    if (w.thread.joinable()) w.thread.join();
+  {
+    std::lock_guard lock(m.mutex);
+    for (auto& l : m.loops)
+      if (l.gap_start >= 0) {
+        m.closed_gaps.push_back({l.db_id, l.gap_start, l.gap_last, l.gap_reason});
+        ++m.counts[static_cast<std::size_t>(&l - m.loops.data())].gaps;
+        l.gap_start = -1;
+      }
+  }
+  if (failure.empty()) m.commit();
+  const RecorderStatus s = m.status(since(t0, Clock::now()));
+  if (!failure.empty()) throw std::runtime_error(failure);
+  m.db->end_run(m.run, stop.load() ? "stopped" : "completed");
+  return s;
+}
+
+}  // namespace valvediag

@@ -1,0 +1,369 @@
+// SQLite storage of recordings. WAL mode with synchronous=NORMAL: a committed transaction
+// survives a killed process, and readers (export, fit) never block the recorder.
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <filesystem>
+#include <type_traits>
+
+#include "valvediag/recorder.hpp"
+
+namespace valvediag {
+
+namespace {
+const char* kSchema = R"sql(
+CREATE TABLE IF NOT EXISTS runs(
+  id INTEGER PRIMARY KEY,
+  started_utc TEXT NOT NULL,
+  ended_utc TEXT,
+  config_file TEXT,
+  status TEXT NOT NULL DEFAULT 'recording');
+CREATE TABLE IF NOT EXISTS loops(
+  id INTEGER PRIMARY KEY,
+  run_id INTEGER NOT NULL REFERENCES runs(id),
+  name TEXT NOT NULL,
+  sample_period REAL NOT NULL,
+  has_sp INTEGER NOT NULL, has_mv INTEGER NOT NULL, has_mode INTEGER NOT NULL,
+  UNIQUE(run_id, name));
+-- One row per sample tick; q_* = 0 good, 1 stale, 2 comm-error, 3 missed, 4 invalid.
+CREATE TABLE IF NOT EXISTS samples(
+  loop_id INTEGER NOT NULL,
+  tick INTEGER NOT NULL,
+  wall REAL NOT NULL,
+  lateness REAL NOT NULL,
+  op REAL, pv REAL, sp REAL, mv REAL, mode REAL,
+  q_op INTEGER NOT NULL, q_pv INTEGER NOT NULL, q_sp INTEGER NOT NULL,
+  q_mv INTEGER NOT NULL, q_mode INTEGER NOT NULL,
+  PRIMARY KEY(loop_id, tick)) WITHOUT ROWID;
+-- Ticks [first_tick, last_tick] without good OP and PV, with the first problem seen.
+CREATE TABLE IF NOT EXISTS gaps(
+  loop_id INTEGER NOT NULL,
+  first_tick INTEGER NOT NULL,
+  last_tick INTEGER NOT NULL,
+  reason TEXT NOT NULL);
+)sql";
+
+std::string utc_now() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char b[32];
+  std::strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return b;
+}
+}  // namespace
+
+struct RecordingDb::Impl {
+  sqlite3* db = nullptr;
+  sqlite3_stmt* insert = nullptr;
+  std::string path;
+
+  [[noreturn]] void fail(const std::string& what) const {
+    throw std::runtime_error(path + ": " + what + ": " + (db ? sqlite3_errmsg(db) : "no database") +
+                             " (check the disk has space and the file is writable)");
+  }
+  void exec(const char* sql) {
+    char* err = nullptr;
+    if (sqlite3_exec(db, sql, nullptr, nullptr, &err) != SQLITE_OK) {
+      std::string m = err ? err : "?";
+      sqlite3_free(err);
+      throw std::runtime_error(path + ": " + m + " (check the disk and the file's permissions)");
+    }
+  }
+  sqlite3_stmt* prepare(const char* sql) {
+    sqlite3_stmt* s = nullptr;
+    if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK) fail("preparing a statement");
+    return s;
+  }
+};
+
+RecordingDb::RecordingDb(const std::string& path, bool create)
+    : path_(path), impl_(std::make_unique<Impl>()) {
+  impl_->path = path;
+  if (!create && !std::filesystem::exists(path))
+    throw std::runtime_error(path + ": no such database; record one with valvediag record --db " +
+                             path);
+  const int flags = create ? SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE : SQLITE_OPEN_READWRITE;
+  if (sqlite3_open_v2(path.c_str(), &impl_->db, flags, nullptr) != SQLITE_OK) {
+    const std::string m = impl_->db ? sqlite3_errmsg(impl_->db) : "out of memory";
+    sqlite3_close(impl_->db);
+    impl_->db = nullptr;
+    throw std::runtime_error(path + ": cannot open the database: " + m);
+  }
+  sqlite3_busy_timeout(impl_->db, 5000);
+  impl_->exec("PRAGMA journal_mode=WAL");
+  impl_->exec("PRAGMA synchronous=NORMAL");
+  if (create) impl_->exec(kSchema);
+}
+
+RecordingDb::~RecordingDb() {
+  if (impl_->insert) sqlite3_finalize(impl_->insert);
+  if (impl_->db) sqlite3_close(impl_->db);
+}
+
+std::int64_t RecordingDb::begin_run(const std::string& config_file) {
+  sqlite3_stmt* s = impl_->prepare("INSERT INTO runs(started_utc, config_file) VALUES(?, ?)");
+  const std::string now = utc_now();
+  sqlite3_bind_text(s, 1, now.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_text(s, 2, config_file.c_str(), -1, SQLITE_TRANSIENT);
+  const int rc = sqlite3_step(s);
+  sqlite3_finalize(s);
+  if (rc != SQLITE_DONE) impl_->fail("recording the run");
+  return sqlite3_last_insert_rowid(impl_->db);
+}
+
+void RecordingDb::end_run(std::int64_t run, const std::string& status) {
+  sqlite3_stmt* s = impl_->prepare("UPDATE runs SET ended_utc = ?, status = ? WHERE id = ?");
+  const std::string now = utc_now();
+  sqlite3_bind_text(s, 1, now.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_text(s, 2, status.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_int64(s, 3, run);
+  const int rc = sqlite3_step(s);
+  sqlite3_finalize(s);
+  if (rc != SQLITE_DONE) impl_->fail("closing the run");
+}
+
+std::int64_t RecordingDb::add_loop(std::int64_t run, const LoopConfigEntry& loop) {
+  sqlite3_stmt* s = impl_->prepare(
+      "INSERT INTO loops(run_id, name, sample_period, has_sp, has_mv, has_mode) "
+      "VALUES(?, ?, ?, ?, ?, ?)");
+  sqlite3_bind_int64(s, 1, run);
+  sqlite3_bind_text(s, 2, loop.name.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_double(s, 3, loop.sample_period_s);
+  sqlite3_bind_int(s, 4, loop.point(PointName::sp).present);
+  sqlite3_bind_int(s, 5, loop.point(PointName::mv).present);
+  sqlite3_bind_int(s, 6, loop.point(PointName::mode).present);
+  const int rc = sqlite3_step(s);
+  sqlite3_finalize(s);
+  if (rc != SQLITE_DONE) impl_->fail("recording loop " + loop.name);
+  return sqlite3_last_insert_rowid(impl_->db);
+}
+
+void RecordingDb::insert(const std::vector<SampleRow>& rows) {
+  if (rows.empty()) return;
+  if (!impl_->insert)
+    impl_->insert = impl_->prepare(
+        "INSERT OR REPLACE INTO samples(loop_id, tick, wall, lateness, op, pv, sp, mv, mode, "
+        "q_op, q_pv, q_sp, q_mv, q_mode) VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)");
+  impl_->exec("BEGIN");
+  sqlite3_stmt* s = impl_->insert;
+  for (const SampleRow& r : rows) {
+    sqlite3_bind_int64(s, 1, r.loop_id);
+    sqlite3_bind_int64(s, 2, r.tick);
+    sqlite3_bind_double(s, 3, r.wall);
+    sqlite3_bind_double(s, 4, r.lateness);
+    for (std::size_t i = 0; i < kPointCount; ++i) {
+      const double v = r.values[i].value;
+      if (std::isfinite(v))
+        sqlite3_bind_double(s, static_cast<int>(5 + i), v);
+      else
+        sqlite3_bind_null(s, static_cast<int>(5 + i));  // never a made-up number
+      sqlite3_bind_int(s, static_cast<int>(10 + i), static_cast<int>(r.values[i].quality));
+    }
+    if (sqlite3_step(s) != SQLITE_DONE) {
+      sqlite3_reset(s);
+      impl_->exec("ROLLBACK");
+      impl_->fail("inserting samples");
+    }
+    sqlite3_reset(s);
+  }
+  impl_->exec("COMMIT");
+}
+
+void RecordingDb::add_gap(std::int64_t loop_id, std::int64_t first_tick, std::int64_t last_tick,
+                          const std::string& reason) {
+  sqlite3_stmt* s =
+      impl_->prepare("INSERT INTO gaps(loop_id, first_tick, last_tick, reason) VALUES(?,?,?,?)");
+  sqlite3_bind_int64(s, 1, loop_id);
+  sqlite3_bind_int64(s, 2, first_tick);
+  sqlite3_bind_int64(s, 3, last_tick);
+  sqlite3_bind_text(s, 4, reason.c_str(), -1, SQLITE_TRANSIENT);
+  const int rc = sqlite3_step(s);
+  sqlite3_finalize(s);
+  if (rc != SQLITE_DONE) impl_->fail("recording a gap");
+}
+
+std::string RecordingDb::integrity_check() {
+  sqlite3_stmt* s = impl_->prepare("PRAGMA integrity_check");
+  std::string out;
+  while (sqlite3_step(s) == SQLITE_ROW) {
+    if (!out.empty()) out += "; ";
+    out += reinterpret_cast<const char*>(sqlite3_column_text(s, 0));
+  }
+  sqlite3_finalize(s);
+  return out;
+}
+
+namespace {
+std::string fmt_time(double t) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.6g", t);
+  return b;
+}
+}  // namespace
+
+RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
+                                std::optional<double> from_s, std::optional<double> to_s,
+                                std::int64_t run, bool longest_clean) {
+  if (!std::filesystem::exists(db_path))
+    throw std::runtime_error(
+        db_path + ": no such database; record one with valvediag record --db " + db_path);
+  sqlite3* c = nullptr;
+  if (sqlite3_open_v2(db_path.c_str(), &c, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
+    sqlite3_close(c);
+    throw std::runtime_error(db_path + ": cannot open the database");
+  }
+  sqlite3_busy_timeout(c, 5000);
+  struct Closer {
+    sqlite3* c;
+    ~Closer() { sqlite3_close(c); }
+  } closer{c};
+  auto prepare = [&](const char* sql) {
+    sqlite3_stmt* s = nullptr;
+    if (sqlite3_prepare_v2(c, sql, -1, &s, nullptr) != SQLITE_OK)
+      throw std::runtime_error(db_path + ": " + sqlite3_errmsg(c) +
+                               " (is this a valvediag recording?)");
+    return s;
+  };
+  RecordedLoop out;
+  std::int64_t loop_id = 0;
+  bool has_sp = false;
+  {
+    sqlite3_stmt* s = prepare(
+        run > 0
+            ? "SELECT id, run_id, sample_period, has_sp FROM loops WHERE name = ? AND run_id = ?"
+            : "SELECT id, run_id, sample_period, has_sp FROM loops WHERE name = ? "
+              "ORDER BY run_id DESC LIMIT 1");
+    sqlite3_bind_text(s, 1, name.c_str(), -1, SQLITE_TRANSIENT);
+    if (run > 0) sqlite3_bind_int64(s, 2, run);
+    const bool found = sqlite3_step(s) == SQLITE_ROW;
+    if (found) {
+      loop_id = sqlite3_column_int64(s, 0);
+      out.run = sqlite3_column_int64(s, 1);
+      out.sample_period = sqlite3_column_double(s, 2);
+      has_sp = sqlite3_column_int(s, 3) != 0;
+    }
+    sqlite3_finalize(s);
+    if (!found) {
+      std::string names;
+      sqlite3_stmt* l = prepare("SELECT DISTINCT name FROM loops ORDER BY name");
+      while (sqlite3_step(l) == SQLITE_ROW)
+        names += (names.empty() ? "" : ", ") +
+                 std::string(reinterpret_cast<const char*>(sqlite3_column_text(l, 0)));
+      sqlite3_finalize(l);
+      throw std::runtime_error(db_path + ": no loop '" + name + "'" +
+                               (run > 0 ? " in run " + std::to_string(run) : "") +
+                               "; recorded loops: " + (names.empty() ? "none" : names));
+    }
+  }
+  const double P = out.sample_period;
+  const std::int64_t first = from_s ? static_cast<std::int64_t>(std::ceil(*from_s / P - 1e-9)) : 0;
+  const std::int64_t last = to_s ? static_cast<std::int64_t>(std::floor(*to_s / P + 1e-9))
+                                 : std::numeric_limits<std::int64_t>::max();
+  sqlite3_stmt* s = prepare(
+      "SELECT tick, op, pv, sp, q_op, q_pv, q_sp FROM samples WHERE loop_id = ? AND tick >= ? "
+      "AND tick <= ? ORDER BY tick");
+  sqlite3_bind_int64(s, 1, loop_id);
+  sqlite3_bind_int64(s, 2, first);
+  sqlite3_bind_int64(s, 3, last);
+  struct Gap {
+    std::int64_t a, b;
+    int q;
+  };
+  std::vector<Gap> gaps;
+  std::vector<std::int64_t> ticks;
+  std::vector<double> op, pv, sp;
+  bool sp_ok = has_sp;
+  std::size_t sp_bad = 0;
+  std::int64_t prev = first - 1;
+  auto add_gap = [&](std::int64_t a, std::int64_t b, int q) {
+    if (!gaps.empty() && gaps.back().b + 1 == a)
+      gaps.back().b = b;
+    else
+      gaps.push_back({a, b, q});
+  };
+  while (sqlite3_step(s) == SQLITE_ROW) {
+    const std::int64_t k = sqlite3_column_int64(s, 0);
+    if (k > prev + 1 && prev >= first) add_gap(prev + 1, k - 1, -1);  // rows lost (kill -9)
+    prev = k;
+    const int qo = sqlite3_column_int(s, 4), qp = sqlite3_column_int(s, 5);
+    if (qo != 0 || qp != 0) {
+      add_gap(k, k, qo != 0 ? qo : qp);
+      continue;
+    }
+    ticks.push_back(k);
+    op.push_back(sqlite3_column_double(s, 1));
+    pv.push_back(sqlite3_column_double(s, 2));
+    if (has_sp) {
+      if (sqlite3_column_int(s, 6) != 0) {
+        sp_ok = false;
+        ++sp_bad;
+      }
+      sp.push_back(sqlite3_column_double(s, 3));
+    }
+  }
+  sqlite3_finalize(s);
+  if (!gaps.empty()) {
+    // Longest clean stretch: suggested, or used with `longest_clean`.
+    std::int64_t best_a = 0, best_len = 0, run_a = 0, run_len = 0;
+    for (std::size_t i = 0; i < ticks.size(); ++i) {
+      if (i == 0 || ticks[i] != ticks[i - 1] + 1) {
+        run_a = ticks[i];
+        run_len = 0;
+      }
+      if (++run_len > best_len) {
+        best_len = run_len;
+        best_a = run_a;
+      }
+    }
+    std::string list;
+    for (std::size_t i = 0; i < gaps.size() && i < 5; ++i) {
+      static const char* const q[] = {"good", "stale", "comm-error", "missed", "invalid"};
+      list += (i ? ", " : "") + fmt_time(static_cast<double>(gaps[i].a) * P) + ".." +
+              fmt_time(static_cast<double>(gaps[i].b + 1) * P) + " s (" +
+              (gaps[i].q < 0 ? "rows missing" : q[std::min(gaps[i].q, 4)]) + ")";
+    }
+    if (gaps.size() > 5) list += ", and " + std::to_string(gaps.size() - 5) + " more";
+    const std::string stretch = fmt_time(static_cast<double>(best_a) * P) + " .. " +
+                                fmt_time(static_cast<double>(best_a + best_len - 1) * P) + " s";
+    if (!longest_clean || best_len < 2)
+      throw RecordingGapError(db_path + ": loop " + name + " has " + std::to_string(gaps.size()) +
+                              " gap(s) without good OP and PV in the range: " + list +
+                              (best_len >= 2
+                                   ? "; the longest clean stretch is --from " +
+                                         fmt_time(static_cast<double>(best_a) * P) + " --to " +
+                                         fmt_time(static_cast<double>(best_a + best_len - 1) * P)
+                                   : "; no clean stretch"));
+    const auto i0 =
+        static_cast<std::ptrdiff_t>(std::find(ticks.begin(), ticks.end(), best_a) - ticks.begin());
+    const auto i1 = i0 + static_cast<std::ptrdiff_t>(best_len);
+    auto cut = [&](auto& v) {
+      if (v.size() != ticks.size()) return;
+      std::remove_reference_t<decltype(v)> part(v.begin() + i0, v.begin() + i1);
+      v.swap(part);
+    };
+    cut(op);
+    cut(pv);
+    cut(sp);
+    cut(ticks);
+    out.notes.push_back("the range has " + std::to_string(gaps.size()) + " gap(s) (" + list +
+                        "); using the longest clean stretch, " + stretch);
+  }
+  out.rows = ticks.size();
+  if (ticks.empty())
+    throw std::runtime_error(db_path + ": loop " + name + " has no samples in the range");
+  LoopData& d = out.data;
+  d.source = db_path + " loop " + name + " (run " + std::to_string(out.run) + ")";
+  for (auto k : ticks) d.t.push_back(static_cast<double>(k) * P);
+  d.op = std::move(op);
+  d.pv = std::move(pv);
+  if (has_sp && sp_ok) d.sp = std::move(sp);
+  if (has_sp && !sp_ok)
+    out.notes.push_back("sp left out: " + std::to_string(sp_bad) + " tick(s) without a good sp");
+  return out;
+}
+
+}  // namespace valvediag

@@ -1,0 +1,54 @@
+// Helpers for the driver and recorder tests: a loopback port nobody listens on, site configs
+// pointed at a port, and bounded waiting.
+#pragma once
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <functional>
+#include <string>
+#include <thread>
+
+#include "valvediag/site_config.hpp"
+
+namespace valvediag::test {
+
+// A port on 127.0.0.1 that was free a moment ago (bound to port 0, then released).
+inline int unused_port() {
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  ::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t len = sizeof a;
+  ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &len);
+  ::close(s);
+  return ntohs(a.sin_port);
+}
+
+// The site file with its modbus-tcp controller moved to 127.0.0.1:port.
+inline SiteConfig site_on_port(const std::string& path, int port) {
+  SiteConfig s = load_site_config(path);
+  for (auto& b : s.buses)
+    if (b.kind == BusKind::modbus_tcp) {
+      b.host = "127.0.0.1";
+      b.port = port;
+    }
+  return s;
+}
+
+// Polls `done` every 10 ms for at most `limit_s`; true when it became true.
+inline bool wait_for(const std::function<bool()>& done, double limit_s) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(limit_s);
+  while (std::chrono::steady_clock::now() < end) {
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return done();
+}
+
+}  // namespace valvediag::test

@@ -1,0 +1,185 @@
+// Site configuration and DBC reader: the example configs load, and every kind of mistake is
+// reported at its line with what to do.
+#include <doctest/doctest.h>
+
+#include <string>
+
+#include "valvediag/dbc.hpp"
+#include "valvediag/site_config.hpp"
+
+using namespace valvediag;
+
+namespace {
+const std::string kConfigs = VALVEDIAG_CONFIG_DIR;
+
+// The error a config text raises ("" when it parses).
+SiteConfigError error_of(const std::string& text) {
+  try {
+    parse_site_config(text, "t.toml", kConfigs);
+  } catch (const SiteConfigError& e) {
+    return e;
+  }
+  FAIL("no error raised for:\n" << text);
+  return SiteConfigError("", 0, 0, "", "");
+}
+
+const char* kBus =
+    "[[bus]]\nname = \"p\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:1502\"\n";
+}  // namespace
+
+TEST_CASE("configs/site.toml: buses, loops and points as written") {
+  const SiteConfig s = load_site_config(kConfigs + "/site.toml");
+  REQUIRE(s.buses.size() == 2);
+  CHECK(s.buses[0].kind == BusKind::modbus_tcp);
+  CHECK(s.buses[0].host == "127.0.0.1");
+  CHECK(s.buses[0].port == 5020);
+  CHECK(s.buses[0].timeout_s == doctest::Approx(0.3));
+  CHECK(s.buses[1].kind == BusKind::modbus_rtu);
+  CHECK(s.buses[1].device == "/dev/ttyUSB0");
+  CHECK(s.buses[1].parity == 'E');
+  CHECK(s.buses[1].pause_s == doctest::Approx(0.02));
+  REQUIRE(s.loops.size() == 2);
+  const auto& tic = s.loops[1];
+  CHECK(tic.sample_period_s == 1.0);
+  CHECK(tic.point(PointName::op).reg == RegisterType::input);
+  CHECK(tic.point(PointName::op).scale == 0.01);
+  CHECK(tic.point(PointName::pv).offset == -50.0);
+  CHECK(tic.point(PointName::sp).type == DataType::uint32);
+  CHECK(tic.point(PointName::sp).order == ByteOrder::cdab);
+  CHECK(tic.point(PointName::mode).present);
+  CHECK(!tic.point(PointName::mv).present);
+}
+
+TEST_CASE("configs/sim-site.toml and configs/can-site.toml load") {
+  const SiteConfig sim = load_site_config(kConfigs + "/sim-site.toml");
+  CHECK(sim.loops.size() == 3);
+  CHECK(sim.loops[0].simulate == "paper-ex1");
+  CHECK(sim.loops[2].point(PointName::pv).order == ByteOrder::badc);
+  const SiteConfig can = load_site_config(kConfigs + "/can-site.toml");
+  REQUIRE(can.loops.size() == 2);
+  const auto& sp = can.loops[0].point(PointName::sp).can;
+  CHECK(sp.frame_id == 291);
+  CHECK(sp.motorola);
+  CHECK(sp.start_bit == 39);
+  CHECK(sp.factor == 0.01);
+  const auto& pv = can.loops[1].point(PointName::pv).can;
+  CHECK(pv.extended);
+  CHECK(pv.frame_id == 0x322);
+  CHECK(pv.is_signed);
+  CHECK(pv.offset == -50.0);
+}
+
+TEST_CASE("config errors name the line, the key and what to do") {
+  const std::string loop =
+      "[[loop]]\nname = \"A\"\nbus = \"p\"\nop = { address = 0, type = \"FLOAT32\" }\n"
+      "pv = { address = 2, type = \"FLOAT32\" }\n";
+  CHECK_NOTHROW(parse_site_config(std::string(kBus) + loop, "t.toml"));
+
+  auto e = error_of(std::string(kBus) + "slave = 3\n" + loop);
+  CHECK(e.line() == 5);
+  CHECK(std::string(e.what()).find("unknown key; remove it or use one of") != std::string::npos);
+
+  e = error_of(std::string(kBus) + "[[loop]]\nname = \"A\"\nbus = \"q\"\n");
+  CHECK(e.line() == 7);
+  CHECK(std::string(e.what()).find("no bus named 'q'") != std::string::npos);
+
+  e = error_of(std::string(kBus) + loop + "sp = { address = 3, type = \"FLOAT32\" }\n");
+  CHECK(e.line() == 10);
+  CHECK(std::string(e.what()).find("overlaps pv at holding register 3") != std::string::npos);
+
+  e = error_of(std::string(kBus) +
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\nop = { address = 0, type = \"REAL\" }\n");
+  CHECK(e.line() == 8);
+  CHECK(e.key() == "loop[0].op.type");
+
+  e = error_of(std::string(kBus) +
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+               "op = { address = 0, type = \"INT16\" }\n");
+  CHECK(std::string(e.what()).find("missing pv") != std::string::npos);
+
+  e = error_of("[[bus]]\nname = \"p\"\nprotocol = \"modbus-tcp\"\ncontroller = \"127.0.0.1\"\n" +
+               loop);
+  CHECK(e.line() == 4);
+  CHECK(std::string(e.what()).find("tcp://") != std::string::npos);
+
+  e = error_of(std::string(kBus) + "timeout = \"fast\"\n" + loop);
+  CHECK(e.line() == 5);
+  e = error_of(std::string(kBus) + loop + "sample_period = \"-1s\"\n");
+  CHECK(e.line() == 10);
+  e = error_of(std::string(kBus) + loop + "op_range = [100, 0]\n");
+  CHECK(e.line() == 10);
+  e = error_of(std::string(kBus) + loop + "[[fault]]\nkind = \"explode\"\n");
+  CHECK(e.line() == 11);
+  e = error_of(std::string(kBus) + loop +
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+               "op = { address = 9, type = \"INT16\" }\n"
+               "pv = { address = 8, type = \"INT16\" }\n");
+  CHECK(std::string(e.what()).find("defined twice") != std::string::npos);
+  e = error_of("x = [1,\n");
+  CHECK(e.line() >= 1);
+  CHECK(std::string(e.what()).find("fix the TOML syntax") != std::string::npos);
+  e = error_of(std::string(kBus));
+  CHECK(std::string(e.what()).find("no [[loop]]") != std::string::npos);
+  // A Modbus key on a CAN bus.
+  e = error_of(
+      "[[bus]]\nname = \"c\"\nprotocol = \"socketcan\"\ninterface = \"can0\"\n"
+      "slave_id = 1\n");
+  CHECK(e.line() == 5);
+  CHECK(std::string(e.what()).find("only applies to Modbus") != std::string::npos);
+  // A DBC signal that is not in the DBC.
+  e = error_of(
+      "[[bus]]\nname = \"c\"\nprotocol = \"socketcan\"\ninterface = \"can0\"\n"
+      "dbc = \"plant.dbc\"\n[[loop]]\nname = \"A\"\nbus = \"c\"\n"
+      "op = { message = \"VALVE_FIC101\", signal = \"OUT\" }\n"
+      "pv = { message = \"VALVE_FIC101\", signal = \"PV\" }\n");
+  CHECK(e.line() == 9);
+  CHECK(std::string(e.what()).find("no signal 'OUT'") != std::string::npos);
+}
+
+TEST_CASE("durations") {
+  CHECK(parse_duration("500ms") == doctest::Approx(0.5));
+  CHECK(parse_duration("10m") == doctest::Approx(600.0));
+  CHECK(parse_duration("2") == doctest::Approx(2.0));
+  CHECK(parse_duration("1.5h") == doctest::Approx(5400.0));
+  CHECK(!parse_duration("-1s"));
+  CHECK(!parse_duration("ms"));
+  CHECK(!parse_duration("1e400"));
+}
+
+TEST_CASE("DBC: messages, signals, extended ids, multiplexing, errors with line numbers") {
+  const Dbc d = load_dbc_file(kConfigs + "/plant.dbc");
+  REQUIRE(d.messages.size() == 2);
+  CHECK(d.messages[0].id == 291);
+  CHECK(!d.messages[0].extended);
+  CHECK(d.messages[1].extended);
+  CHECK(d.messages[1].id == 0x322);
+  REQUIRE(d.messages[0].signals.size() == 3);
+  const auto& sp = d.messages[0].signals[2];
+  CHECK(sp.name == "SP");
+  CHECK(sp.signal.motorola);
+  CHECK(sp.maximum == 200.0);
+  CHECK(sp.unit == "m3/h");
+  CHECK(d.messages[1].signals[1].signal.is_signed);
+
+  const Dbc m = parse_dbc(
+      "BO_ 100 MUX: 8 X\n SG_ Sel M : 0|8@1+ (1,0) [0|3] \"\" Y\n"
+      " SG_ A m1 : 8|8@1+ (1,0) [0|3] \"\" Y\n",
+      "m.dbc");
+  CHECK(!m.messages[0].signals[0].multiplexed);
+  CHECK(m.messages[0].signals[1].multiplexed);
+
+  auto line_of = [](const char* text) {
+    try {
+      parse_dbc(text, "x.dbc");
+    } catch (const DbcError& e) {
+      return e.line();
+    }
+    return -1;
+  };
+  CHECK(line_of("VERSION \"\"\n SG_ A : 0|8@1+ (1,0) [0|1] \"\" X\n") == 2);   // before any BO_
+  CHECK(line_of("BO_ 1 M: 8 X\n SG_ A : 0|8@2+ (1,0) [0|1] \"\" X\n") == 2);   // bad order
+  CHECK(line_of("BO_ 1 M: 2 X\n SG_ A : 8|16@1+ (1,0) [0|1] \"\" X\n") == 2);  // beyond 2 bytes
+  CHECK(line_of("BO_ 1 M: 8 X\n\n SG_ A : 0|8@1+ (1,0 [0|1] \"\" X\n") == 3);  // missing ')'
+  CHECK(line_of("BO_ 4096 M: 8 X\n") == 1);  // 11-bit id too large
+  CHECK(line_of("BO_ 1 M: 8 X\nBO_ 2 M: 8 X\n") == 2);
+}

@@ -1,0 +1,125 @@
+// Shared by the libFuzzer targets of the bus layer and test_bus (which replays their seed corpora
+// and every saved crash input): site config loader, DBC parser, register and CAN decoders.
+// Each returns "" when the input was handled correctly (parsed into something consistent, or
+// refused with the documented error), otherwise what is wrong. Other exceptions escape: bugs.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <string_view>
+
+#include "valvediag/dbc.hpp"
+#include "valvediag/site_config.hpp"
+#include "valvediag/value_codec.hpp"
+
+namespace valvediag::fuzz {
+
+inline std::string run_site_config(std::string_view text) {
+  SiteConfig s;
+  try {
+    // No base directory: relative file names resolve from the fuzzer's working directory.
+    s = parse_site_config(text, "fuzz.toml", "");
+  } catch (const SiteConfigError& e) {
+    if (std::string_view(e.what()).substr(0, 9) != "fuzz.toml") return "message without file";
+    return "";
+  }
+  if (s.loops.empty()) return "accepted a site without loops";
+  for (const auto& l : s.loops) {
+    const BusConfig* b = s.find_bus(l.bus);
+    if (!b) return "loop on an unknown bus accepted";
+    if (!(l.sample_period_s > 0) || !(l.op_min < l.op_max)) return "bad loop numbers accepted";
+    if (!l.point(PointName::op).present || !l.point(PointName::pv).present)
+      return "loop without op/pv accepted";
+    for (const auto& p : l.points) {
+      if (!p.present) continue;
+      if (b->kind == BusKind::socketcan) {
+        if (!check_can_signal(p.can).empty()) return "CAN signal outside the frame accepted";
+      } else {
+        if (p.address < 0 || p.address + static_cast<int>(register_count(p.type)) > 65536)
+          return "register address out of range accepted";
+        if (p.scale == 0.0 || !std::isfinite(p.scale) || !std::isfinite(p.offset))
+          return "bad scale accepted";
+      }
+    }
+  }
+  return "";
+}
+
+inline std::string run_dbc(std::string_view text) {
+  Dbc d;
+  try {
+    d = parse_dbc(text, "fuzz.dbc");
+  } catch (const DbcError& e) {
+    if (std::string_view(e.what()).substr(0, 8) != "fuzz.dbc") return "message without file";
+    return "";
+  }
+  for (const auto& m : d.messages)
+    for (const auto& s : m.signals) {
+      if (!check_can_signal(s.signal, m.dlc).empty()) return "signal outside its message accepted";
+      if (s.signal.frame_id != m.id) return "signal frame id differs from its message";
+    }
+  return "";
+}
+
+// Bytes: [type/order][scale/offset][4 register bytes][start bit][length][flags][8 data bytes].
+inline std::string run_codec(std::string_view in) {
+  std::uint8_t b[17] = {};
+  std::memcpy(b, in.data(), std::min<std::size_t>(in.size(), sizeof b));
+  const auto type = static_cast<DataType>(b[0] % 5);
+  const auto order = static_cast<ByteOrder>((b[0] >> 3) % 4);
+  static const double kScale[] = {1, 0.1, 0.01, -2.5, 1e-3, 10, 0.5, 3};
+  static const double kOffset[] = {0, -50, 12.5, 1e6};
+  const double scale = kScale[b[1] & 7], offset = kOffset[(b[1] >> 3) & 3];
+  const std::uint16_t regs[2] = {static_cast<std::uint16_t>((b[2] << 8) | b[3]),
+                                 static_cast<std::uint16_t>((b[4] << 8) | b[5])};
+  const double raw = decode_raw(regs, type, order);
+  if (type != DataType::float32) {
+    if (!std::isfinite(raw) || raw != std::floor(raw)) return "integer decoded to a fraction";
+    std::uint16_t back[2] = {0, 0};
+    encode_registers(raw, type, order, 1.0, 0.0, back);
+    if (back[0] != regs[0] || (register_count(type) == 2 && back[1] != regs[1]))
+      return "integer register round trip differs";
+  } else if (std::isfinite(raw) && raw != 0.0) {
+    std::uint16_t back[2] = {0, 0};
+    encode_registers(raw, type, order, 1.0, 0.0, back);
+    if (back[0] != regs[0] || back[1] != regs[1]) return "float register round trip differs";
+  }
+  const double eng = decode_registers(regs, type, order, scale, offset);
+  if (std::isfinite(raw) &&
+      !(std::fabs(eng - (raw * scale + offset)) <= 1e-9 * (1 + std::fabs(eng))))
+    return "scale/offset misapplied";
+
+  CanSignal s;
+  s.start_bit = b[6] % 64;
+  s.length = b[7] % 64 + 1;
+  s.motorola = (b[8] & 1) != 0;
+  s.is_signed = (b[8] & 2) != 0;
+  const std::size_t dlc = (b[8] >> 2) % 9;
+  const std::span<const std::uint8_t> data(b + 9, dlc);
+  if (!check_can_signal(s, dlc).empty()) {
+    try {
+      (void)can_signal_raw(s, data);
+    } catch (const std::invalid_argument&) {
+      return "";
+    }
+    return "a signal outside the frame decoded";
+  }
+  const std::int64_t r = can_signal_raw(s, data);
+  if (s.length < 64) {
+    const double lim = std::ldexp(1.0, static_cast<int>(s.length));
+    const double v = static_cast<double>(r);
+    if (s.is_signed ? (v < -lim / 2 || v >= lim / 2) : (v < 0 || v >= lim))
+      return "CAN raw value outside its bit range";
+  }
+  if (s.length <= 52) {  // exact in a double
+    std::uint8_t copy[8];
+    std::memcpy(copy, b + 9, 8);
+    encode_can_signal(s, static_cast<double>(r), std::span<std::uint8_t>(copy, dlc));
+    if (std::memcmp(copy, b + 9, dlc) != 0) return "CAN round trip changed the frame";
+  }
+  return "";
+}
+
+}  // namespace valvediag::fuzz

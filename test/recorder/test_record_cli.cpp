@@ -1,0 +1,199 @@
+// The record, export and fit commands in their own processes: kill -9 of the recorder, exit
+// statuses, config errors before any bus traffic. Each child is bounded: killed after a limit.
+#include <doctest/doctest.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sqlite3.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "../bus/bus_test_util.hpp"
+#include "valvediag/sim_plc.hpp"
+
+using namespace valvediag;
+namespace fs = std::filesystem;
+
+namespace {
+const std::string kSimSite = std::string(VALVEDIAG_CONFIG_DIR) + "/sim-site.toml";
+const fs::path kTmp = VALVEDIAG_TMP;
+
+pid_t spawn(const std::vector<std::string>& args, const fs::path& out) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, 1);
+    ::dup2(fd, 2);
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    ::execv(VALVEDIAG_BIN, argv.data());
+    ::_exit(127);
+  }
+  return pid;
+}
+
+// Exit status of the child, or -1 after killing it when it outlives `limit_s`.
+int wait_child(pid_t pid, double limit_s) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(limit_s);
+  int status = 0;
+  while (std::chrono::steady_clock::now() < end) {
+    if (::waitpid(pid, &status, WNOHANG) == pid)
+      return WIFEXITED(status) ? WEXITSTATUS(status) : -2;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, &status, 0);
+  return -1;
+}
+
+struct Result {
+  int status;
+  std::string out;
+};
+Result run(const std::vector<std::string>& args, double limit_s = 60.0) {
+  static int n = 0;
+  const fs::path out = kTmp / ("cli_out_" + std::to_string(++n) + ".txt");
+  std::vector<std::string> full{VALVEDIAG_BIN};
+  full.insert(full.end(), args.begin(), args.end());
+  const int st = wait_child(spawn(full, out), limit_s);
+  std::ifstream f(out);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return {st, ss.str()};
+}
+
+std::string fresh(const std::string& name) {
+  const fs::path p = kTmp / name;
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
+  return p.string();
+}
+
+// A site file for the PLC on `port`: FIC101 alone, polled every `period` s.
+std::string write_site(const std::string& name, int port, double period,
+                       const std::string& extra = "") {
+  const fs::path p = kTmp / name;
+  std::ofstream f(p);
+  f << "[[bus]]\nname = \"plc\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:" << port
+    << "\"\ntimeout = \"100ms\"\nretries = 0\nreconnect_max = \"500ms\"\n"
+    << "[[loop]]\nname = \"FIC101\"\nbus = \"plc\"\nsample_period = " << period << "\n"
+    << "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
+    << "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\n"
+    << "sp = { register = \"holding\", address = 4, type = \"FLOAT32\" }\n"
+    << extra;
+  return p.string();
+}
+
+double scalar(const std::string& db, const std::string& sql, std::string* text = nullptr) {
+  sqlite3* c = nullptr;
+  if (sqlite3_open_v2(db.c_str(), &c, SQLITE_OPEN_READWRITE, nullptr) != SQLITE_OK) {
+    sqlite3_close(c);
+    return std::nan("");
+  }
+  sqlite3_busy_timeout(c, 2000);
+  sqlite3_stmt* s = nullptr;
+  double v = std::nan("");
+  if (sqlite3_prepare_v2(c, sql.c_str(), -1, &s, nullptr) == SQLITE_OK &&
+      sqlite3_step(s) == SQLITE_ROW) {
+    v = sqlite3_column_double(s, 0);
+    if (text && sqlite3_column_text(s, 0))
+      *text = reinterpret_cast<const char*>(sqlite3_column_text(s, 0));
+  }
+  sqlite3_finalize(s);
+  sqlite3_close(c);
+  return v;
+}
+
+double wall_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+}  // namespace
+
+TEST_CASE("kill -9 of the recorder: database intact, at most 1 s lost") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string site = write_site("kill9.toml", plc.port(), 0.05);
+  const std::string db = fresh("kill9.sqlite");
+  const pid_t pid =
+      spawn({VALVEDIAG_BIN, "record", "--config", site, "--db", db, "--quiet", "--duration", "60s"},
+            kTmp / "kill9.txt");
+  // Wait (bounded) until it has committed a few transactions, then kill it mid-run.
+  REQUIRE(test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 30; }, 20.0));
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));
+  const double killed_at = wall_now();
+  ::kill(pid, SIGKILL);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  CHECK(WIFSIGNALED(status));
+  std::string integrity;
+  scalar(db, "PRAGMA integrity_check", &integrity);
+  CHECK(integrity == "ok");
+  const double last = scalar(db, "SELECT max(wall) FROM samples");
+  MESSAGE("kill -9 lost the last " << killed_at - last << " s");
+  CHECK(killed_at - last <= 1.0);
+  // No hole: every tick up to the last stored one has its row.
+  CHECK(scalar(db, "SELECT max(tick) + 1 - count(*) FROM samples") == 0);
+  CHECK(plc.write_requests() == 0);
+}
+
+TEST_CASE("a config error is reported with file and line before any bus traffic") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string site =
+      write_site("bad.toml", plc.port(), 0.05, "mv = { register = \"coil\", address = 9 }\n");
+  const Result r = run({"record", "--config", site, "--db", fresh("bad.sqlite")});
+  CHECK(r.status == 2);
+  CHECK(r.out.find("bad.toml:15:") != std::string::npos);
+  CHECK(r.out.find("must be \"holding\" or \"input\"") != std::string::npos);
+  CHECK(plc.connections() == 0);
+  CHECK(!fs::exists(kTmp / "bad.sqlite"));
+}
+
+TEST_CASE("record exits 4 when errors happened, 0 when not; export and fit read the database") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{100.0, 0});
+  plc.start();
+  // paper-ex1 at 100x: Ts 0.5 s becomes 5 ms; recorded at the same period.
+  const std::string site = write_site("clean.toml", plc.port(), 0.005);
+  const std::string db = fresh("clean.sqlite");
+  Result r = run({"record", "--config", site, "--db", db, "--duration", "3s", "--quiet"});
+  INFO(r.out);
+  const bool clean = r.out.find(" 0 with errors") != std::string::npos;
+  CHECK(r.status == (clean ? 0 : 4));
+  CHECK(r.out.find("FIC101: 600 samples") != std::string::npos);
+  const fs::path csv = kTmp / "clean.csv";
+  fs::remove(csv);
+  r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string(), "--from", "0.5"});
+  if (clean) {
+    CHECK(r.status == 0);
+    std::ifstream f(csv);
+    std::string header;
+    std::getline(f, header);
+    CHECK(header == "t,op,pv,sp");
+    r = run({"fit", "--db", db, "--loop", "FIC101", "--na-max", "1", "--nb-max", "1", "--nk-max",
+             "6", "--L-max", "6"});
+    CHECK(r.status == 0);
+    CHECK(r.out.find("fitness:") != std::string::npos);
+  }
+  r = run({"export", "--db", db, "--loop", "NOPE", "--out", csv.string()});
+  CHECK(r.status == 2);
+  CHECK(r.out.find("recorded loops: FIC101") != std::string::npos);
+  r = run({"fit", "--db", db});
+  CHECK(r.status == 2);
+
+  // Every request refused: exit status 4 and the exception count in the summary.
+  FaultConfig f;
+  f.kind = FaultKind::exception;
+  plc.add_fault(f);
+  r = run({"record", "--config", site, "--db", fresh("refused.sqlite"), "--duration", "0.5s",
+           "--quiet"});
+  CHECK(r.status == 4);
+  CHECK(r.out.find("exceptions") != std::string::npos);
+  CHECK(r.out.find("Slave device or server failure") != std::string::npos);
+  CHECK(plc.write_requests() == 0);
+}

@@ -1,0 +1,244 @@
+// The recorder against the simulated PLC over real Modbus TCP on 127.0.0.1: rows per tick,
+// quality flags, gaps, faults, a server away at the start and restarted mid-run, read-only.
+// Every run is bounded by its --duration.
+#include <doctest/doctest.h>
+#include <sqlite3.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <thread>
+
+#include "../bus/bus_test_util.hpp"
+#include "valvediag/bus_factory.hpp"
+#include "valvediag/recorder.hpp"
+#include "valvediag/sim_plc.hpp"
+
+using namespace valvediag;
+namespace fs = std::filesystem;
+
+namespace {
+const std::string kSimSite = std::string(VALVEDIAG_CONFIG_DIR) + "/sim-site.toml";
+constexpr double kPeriod = 0.05;
+
+std::string fresh_db(const std::string& name) {
+  const fs::path p = fs::path(VALVEDIAG_TMP) / (name + ".sqlite");
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
+  return p.string();
+}
+
+// The sim site with every loop polled at 20 Hz.
+SiteConfig fast_site(int port) {
+  SiteConfig s = test::site_on_port(kSimSite, port);
+  for (auto& l : s.loops) l.sample_period_s = kPeriod;
+  s.buses[0].timeout_s = 0.1;
+  s.buses[0].retries = 0;
+  s.buses[0].reconnect_max_s = 0.5;
+  return s;
+}
+
+// Runs a query returning one number.
+double scalar(const std::string& db, const std::string& sql) {
+  sqlite3* c = nullptr;
+  REQUIRE(sqlite3_open_v2(db.c_str(), &c, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK);
+  sqlite3_stmt* s = nullptr;
+  REQUIRE(sqlite3_prepare_v2(c, sql.c_str(), -1, &s, nullptr) == SQLITE_OK);
+  double v = std::nan("");
+  if (sqlite3_step(s) == SQLITE_ROW) v = sqlite3_column_double(s, 0);
+  sqlite3_finalize(s);
+  sqlite3_close(c);
+  return v;
+}
+
+double wall_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+bool no_writes(const SimPlc& plc) {
+  const auto c = plc.function_counts();
+  for (std::size_t fc = 0; fc < c.size(); ++fc)
+    if (c[fc] && fc != 3 && fc != 4) return false;
+  return plc.write_requests() == 0;
+}
+}  // namespace
+
+TEST_CASE("records one row per tick per loop, all good, and never writes") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string db = fresh_db("basic");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 1.0;
+  Recorder rec(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false};
+  int statuses = 0;
+  const RecorderStatus s = rec.run(stop, [&](const RecorderStatus&) { ++statuses; });
+  REQUIRE(s.loops.size() == 3);
+  for (const auto& l : s.loops) {
+    INFO(l.name);
+    CHECK(l.rows == 20);  // ticks 0..19 of 50 ms in 1 s: one row each, late or not
+    CHECK(l.comm_error == 0);
+    CHECK(l.missed <= 2);  // only a badly overloaded machine misses a 50 ms tick
+  }
+  CHECK(s.committed == 60);
+  CHECK(no_writes(plc));
+  CHECK(plc.function_counts()[3] >= 36);  // FIC101 and LIC201, one request per tick each
+  CHECK(scalar(db, "SELECT count(*) FROM samples") == 60);
+  CHECK(scalar(db, "SELECT count(DISTINCT tick) FROM samples") == 20);
+  CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed'") == 1);
+  const RecordedLoop r = read_recorded_loop(db, "FIC101");
+  if (s.loops[0].missed == 0) {
+    REQUIRE(r.data.size() == 20);
+    CHECK(r.data.t[19] == doctest::Approx(19 * kPeriod));
+    CHECK(r.data.has_sp());
+    for (std::size_t i = 0; i < r.data.size(); ++i) {
+      CHECK(r.data.op[i] >= 0.0);
+      CHECK(r.data.op[i] <= 100.0);
+      CHECK(std::fabs(r.data.pv[i] - 50.0) < 20.0);  // paper-ex1 runs around PV 50
+    }
+  }
+  CHECK_THROWS_AS(read_recorded_loop(db, "NOPE"), std::runtime_error);
+  CHECK_THROWS_AS(Recorder(fast_site(plc.port()), RecorderOptions{db, {"NOPE"}, 1.0}, make_bus),
+                  std::invalid_argument);
+}
+
+TEST_CASE("server down at start: comm-error rows, backoff, records once it is up") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  plc.restart(1.0);  // away for the first second of the recording
+  const double t_back = wall_now() + 1.0;
+  const std::string db = fresh_db("down_at_start");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 3.0;
+  o.loops = {"FIC101"};
+  Recorder rec(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false};
+  const RecorderStatus s = rec.run(stop);
+  REQUIRE(s.loops.size() == 1);
+  CHECK(s.loops[0].rows == 60);
+  CHECK(s.loops[0].comm_error >= 10);  // about 1 s of 50 ms ticks
+  CHECK(s.loops[0].good >= 20);
+  CHECK(s.errors());
+  CHECK(s.last_error.find("cannot connect to 127.0.0.1") != std::string::npos);
+  // Backoff: far fewer connection attempts than ticks while it was away.
+  CHECK(s.buses[0].second.connect_attempts <= 12);
+  const double first_good = scalar(db, "SELECT min(wall) FROM samples WHERE q_op = 0 AND q_pv = 0");
+  MESSAGE("first good read " << first_good - t_back << " s after the server came back");
+  CHECK(first_good - t_back < 2.0);
+  CHECK(scalar(db, "SELECT count(*) FROM gaps") == 1);
+  CHECK(scalar(db, "SELECT first_tick FROM gaps") == 0);
+  CHECK(scalar(db, "SELECT count(*) FROM samples WHERE q_op = 2 AND op IS NOT NULL") == 0);
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE(
+    "server restarted while recording: keeps running, reconnects, marks the gap, loses nothing") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string db = fresh_db("restart");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 4.0;
+  Recorder rec(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false};
+  double t_back = 0.0;
+  std::thread killer([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+    plc.restart(1.0);
+    t_back = wall_now() + 1.0;
+  });
+  const RecorderStatus s = rec.run(stop);
+  killer.join();
+  for (const auto& l : s.loops) {
+    INFO(l.name);
+    CHECK(l.rows == 80);  // every tick has its row: nothing lost
+    CHECK(l.comm_error >= 10);
+    CHECK(l.good >= 30);
+    CHECK(l.gaps >= 1);
+  }
+  CHECK(scalar(db, "SELECT count(*) FROM samples") == 240);
+  CHECK(scalar(db, "SELECT count(*) FROM gaps") >= 3);
+  // Half-way through the outage every read fails: the first good one after is the reconnection.
+  const double back_good = scalar(db, "SELECT min(wall) FROM samples WHERE q_op = 0 AND wall > " +
+                                          std::to_string(t_back - 0.5));
+  MESSAGE("reconnected " << back_good - t_back << " s after the server came back");
+  CHECK(back_good - t_back < 2.0);
+  CHECK(s.buses[0].second.reconnects >= 1);
+  // Before the restart every row is good: what it had is kept.
+  CHECK(scalar(db, "SELECT count(*) FROM samples WHERE tick < 15 AND (q_op != 0 AND q_op != 3)") ==
+        0);
+  // Export refuses the gap and names the clean stretch.
+  try {
+    read_recorded_loop(db, "FIC101");
+    FAIL("a gap was exported");
+  } catch (const RecordingGapError& e) {
+    CHECK(std::string(e.what()).find("the longest clean stretch is --from") != std::string::npos);
+  }
+  CHECK(read_recorded_loop(db, "FIC101", 0.0, 0.5).data.size() == 11);
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE("timeouts, exceptions and garbled replies are counted and flagged, never a hang") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  FaultConfig timeout;
+  timeout.kind = FaultKind::timeout;
+  timeout.address = 0;  // FIC101
+  timeout.every = 4;
+  FaultConfig exception;
+  exception.kind = FaultKind::exception;
+  exception.address = 12;  // LIC201
+  exception.every = 3;
+  FaultConfig garble;
+  garble.kind = FaultKind::garble;
+  garble.address = 21;  // PIC301
+  garble.every = 3;
+  FaultConfig slow;
+  slow.kind = FaultKind::delay;
+  slow.delay_s = 0.02;
+  slow.address = 21;
+  slow.every = 2;
+  for (const auto& f : {timeout, exception, garble, slow}) plc.add_fault(f);
+  plc.start();
+  const std::string db = fresh_db("faults");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 2.0;
+  Recorder rec(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false};
+  const RecorderStatus s = rec.run(stop);
+  const BusStats b = s.buses[0].second;
+  CHECK(b.timeouts >= 2);
+  CHECK(b.exceptions >= 3);
+  CHECK(b.garbled >= 3);
+  for (const auto& l : s.loops) {
+    INFO(l.name);
+    CHECK(l.rows == 40);
+    CHECK(l.comm_error + l.missed >= 3);
+    CHECK(l.good >= 10);
+  }
+  CHECK(s.errors());
+  // Flagged rows carry no number.
+  CHECK(scalar(db, "SELECT count(*) FROM samples WHERE q_pv != 0 AND pv IS NOT NULL") == 0);
+  CHECK(scalar(db, "SELECT count(*) FROM samples WHERE q_pv = 2") >= 9);
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE("Ctrl-C (the stop flag) ends a run without a duration cleanly") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string db = fresh_db("stop");
+  RecorderOptions o;
+  o.db_path = db;
+  Recorder rec(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false};
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    stop = true;
+  });
+  const RecorderStatus s = rec.run(stop);
+  stopper.join();
+  CHECK(s.rows >= 15);
+  CHECK(s.committed == s.rows);
+  CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'stopped'") == 1);
+}
