@@ -27,6 +27,8 @@ struct UsageError : std::runtime_error {
 void add_fit(CLI::App& app, int& exit_code);
 void add_simulate(CLI::App& app, int& exit_code);
 void add_demo(CLI::App& app, int& exit_code);
+void add_diagnose(CLI::App& app, int& exit_code);
+void add_ladder(CLI::App& app, int& exit_code);
 void add_sim_plc(CLI::App& app, int& exit_code);
 void add_record(CLI::App& app, int& exit_code);
 void add_export(CLI::App& app, int& exit_code);

@@ -5,6 +5,7 @@
 
 #include "commands.hpp"
 #include "valvediag/data_error.hpp"
+#include "valvediag/model_spec.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/site_config.hpp"
 
@@ -20,6 +21,8 @@ int main(int argc, char** argv) {
   add_demo(app, code);
   add_fit(app, code);
   add_simulate(app, code);
+  add_diagnose(app, code);
+  add_ladder(app, code);
   add_sim_plc(app, code);
   add_record(app, code);
   add_export(app, code);

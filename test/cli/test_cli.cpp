@@ -172,3 +172,34 @@ TEST_CASE("simulate lists and writes scenarios; bad names are user errors") {
   CHECK(bad.status == 2);
   CHECK(bad.out.find("paper-ex1") != std::string::npos);  // names the known ones
 }
+
+TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladder") {
+  REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --out " + tmp("diag.csv")).status == 0);
+  std::remove((tmp("diag.csv") + ".history.json").c_str());
+  auto r = run("diagnose " + tmp("diag.csv") + " --auto --json " + tmp("diag.json"));
+  REQUIRE(r.status == 0);
+  CHECK(r.out.find("verdict:   stiction") != std::string::npos);
+  std::ifstream f(tmp("diag.json"));
+  const auto j = nlohmann::json::parse(f);
+  for (const char* k :
+       {"model", "fitness_percent", "validation_fitness_percent", "findings", "verdict"})
+    CHECK_MESSAGE(j.contains(k), k);
+  CHECK(j["model"] == "stiction");
+  CHECK(j["verdict"] == "stiction");
+  CHECK(j["stiction"]["fs_percent"].get<double>() == doctest::Approx(8.4).epsilon(0.2));
+  REQUIRE(!j["findings"].empty());
+  for (const auto& x : j["findings"])
+    for (const char* k : {"effect", "score", "validation_gain_percent", "where", "explanation"})
+      CHECK_MESSAGE(x.contains(k), k);
+  auto l = run("ladder " + tmp("diag.csv"));
+  CHECK(l.status == 0);
+  CHECK(l.out.find("linear") != std::string::npos);
+  CHECK(l.out.find("stiction.fs") != std::string::npos);
+  // User errors: an unknown effect names the vocabulary; no history yet is explained.
+  auto bad = run("diagnose " + tmp("diag.csv") + " --model stiction+wobble");
+  CHECK(bad.status == 2);
+  CHECK(bad.out.find("deadband") != std::string::npos);
+  auto none = run("ladder " + tmp("nothing-here.csv"));
+  CHECK(none.status == 2);
+  CHECK(none.out.find("diagnose") != std::string::npos);
+}

@@ -1,0 +1,72 @@
+// Which physical effect is missing from a loop model: residual evidence combined with trial fits
+// scored on held-out data, ranked; and the automatic climb of the model ladder.
+//
+// For each candidate effect not in the model, a trial fit with it added is compared with the
+// model on the validation part of the record (so a more flexible model cannot win by
+// over-fitting), and on the estimation part: the smaller gain counts, relative to the error the
+// model leaves. It is combined with the residual tests (residual_analysis.hpp) that point to the
+// effect.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "valvediag/model_fit.hpp"
+#include "valvediag/model_spec.hpp"
+#include "valvediag/residual_analysis.hpp"
+
+namespace valvediag {
+
+struct Finding {
+  std::string effect;                       // effect name (effects.md)
+  double score = 0.0;                       // 0..1, how likely this effect is the missing one
+  double validation_gain_percent = 0.0;     // fitness gained by the trial fit on validation data
+  double estimation_gain_percent = 0.0;     // ... on estimation data
+  double gain_percent = 0.0;                // the smaller of the two: what the score uses
+  bool supported = false;                   // score and gain clear DiagnoseOptions' thresholds
+  double evidence = 0.0;                    // strongest residual test pointing to it, 0..1
+  std::string evidence_test;                // that test's name
+  std::vector<NamedValue> parameters;       // the trial fit's parameters of the effect
+  std::vector<ResidualInterval> intervals;  // where the model fails because of it
+  std::vector<ResidualRegion> regions;      // operating regions that carry it
+  std::string explanation;                  // one plain line an engineer can act on
+  std::string indistinguishable_from;       // another effect that fits the data as well, if any
+  ModelSpec trial_spec;
+  double trial_fitness_percent = 0.0, trial_validation_fitness_percent = 0.0;
+};
+
+struct DiagnoseOptions {
+  ModelFitOptions fit;  // validation_fraction defaults to 0.3 below when unset
+  double validation_fraction = 0.3;
+  std::vector<std::string> candidates;  // empty: every effect not in the model
+  double min_gain_percent = 2.0;        // --auto: a step must gain this much (validation)
+  double min_score = 0.35;              // --auto: and score at least this
+  int max_steps = 4;                    // --auto: at most this many effects added
+};
+
+struct DiagnosisStep {
+  ModelFit fit;                   // the model at this step
+  ResidualAnalysis residual;      // where it fails
+  std::vector<Finding> findings;  // ranked, most likely missing first
+};
+
+struct Diagnosis {
+  std::vector<DiagnosisStep> steps;  // one without --auto; the climbed ladder with it
+  std::string conclusion;            // what is left (noise level, unexplained intervals)
+  const DiagnosisStep& last() const { return steps.back(); }
+};
+
+// One diagnosis of `model` (the last step's findings rank the candidates).
+Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                   const ModelSpec& model, const DiagnoseOptions& opt = {});
+
+// Climbs the ladder: adds the best supported effect while the validation error falls by a
+// meaningful margin, then stops with a statement of what is left.
+Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                        const ModelSpec& start, const DiagnoseOptions& opt = {});
+
+// The verdict a plant engineer wants first, from a diagnosis: "stiction", "deadband",
+// "other-nonlinearity", "no-valve-problem".
+std::string verdict(const Diagnosis& d);
+
+}  // namespace valvediag

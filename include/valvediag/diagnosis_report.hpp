@@ -1,0 +1,17 @@
+// Terminal text and JSON of a diagnosis (diagnosis.hpp) and of a model ladder.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "valvediag/diagnosis.hpp"
+#include "valvediag/model_history.hpp"
+
+namespace valvediag {
+
+std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t);
+nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t);
+std::string format_ladder(const std::vector<HistoryEntry>& entries);
+
+}  // namespace valvediag

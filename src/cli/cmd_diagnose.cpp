@@ -1,0 +1,101 @@
+#include <iostream>
+
+#include "commands.hpp"
+#include "data_options.hpp"
+#include "fit_runner.hpp"
+#include "valvediag/data_checks.hpp"
+#include "valvediag/diagnosis_report.hpp"
+
+namespace valvediag::cli {
+
+void add_diagnose(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand("diagnose",
+                                 "Find which physical effect the loop model is missing, ranked");
+  cmd->footer(
+      "Each effect not in the model is added in a trial fit and scored on held-out data, together "
+      "with\n"
+      "residual tests that point to it. --auto adds the best supported effect while the error "
+      "falls.\n"
+      "Examples:\n"
+      "  valvediag diagnose loop.csv                        (start from the linear model)\n"
+      "  valvediag diagnose loop.csv --model stiction --json diag.json\n"
+      "  valvediag diagnose loop.csv --auto                 (climb the ladder; see valvediag "
+      "ladder loop.csv)");
+  struct Args {
+    DataOptions data;
+    std::string model = "linear";
+    double validate = 0.3;
+    bool autoclimb = false, no_history = false;
+    double min_gain = 2.0;
+    std::vector<std::string> candidates;
+    std::string json;
+  };
+  auto a = std::make_shared<Args>();
+  add_data_options(cmd, a->data);
+  cmd->add_option("--model", a->model,
+                  "the model to diagnose, e.g. linear, stiction, stiction+saturation")
+      ->capture_default_str();
+  cmd->add_option("--validate", a->validate, "fraction of the record held out for scoring")
+      ->capture_default_str();
+  cmd->add_flag("--auto", a->autoclimb,
+                "add the best supported effect while validation error falls");
+  cmd->add_option("--min-gain", a->min_gain,
+                  "--auto: smallest fitness gain (points) worth an effect")
+      ->capture_default_str();
+  cmd->add_option("--candidates", a->candidates, "only try these effects (comma separated)")
+      ->delimiter(',');
+  cmd->add_option("--json", a->json, "write model, fitness, findings, verdict as JSON");
+  cmd->add_flag("--no-history", a->no_history,
+                "do not add the fits to the model history next to the data");
+  cmd->callback([a, &exit_code] {
+    if (!(a->validate > 0.05 && a->validate < 0.9))
+      throw UsageError("--validate must lie in (0.05, 0.9)");
+    const ModelSpec spec = parse_model_spec(a->model);
+    std::vector<std::string> notes;
+    const LoopData d = load_data(a->data, notes);
+    check_identifiable_data(d, 200, "a diagnosis");
+    for (const auto& n : notes) std::cout << "note: " << n << "\n";
+    DiagnoseOptions o;
+    o.validation_fraction = a->validate;
+    o.min_gain_percent = a->min_gain;
+    o.candidates = a->candidates;
+    for (const auto& c : o.candidates) (void)parse_effect(c);  // unknown names are user errors
+    const double Ts = d.sample_period();
+    const Diagnosis r =
+        a->autoclimb ? diagnose_auto(d.op, d.pv, Ts, spec, o) : diagnose(d.op, d.pv, Ts, spec, o);
+    std::cout << format_diagnosis(r, d.t);
+    if (!a->json.empty()) {
+      write_text(a->json, diagnosis_json(r, d.t).dump(2) + "\n");
+      std::cout << "wrote " << a->json << "\n";
+    }
+    if (!a->no_history) {
+      std::vector<HistoryEntry> entries;
+      for (const auto& s : r.steps)
+        entries.push_back(history_entry(s.fit, a->autoclimb ? "diagnose --auto" : "diagnose"));
+      const std::string path = history_path_for(a->data.data);
+      append_history(path, entries);
+      std::cout << "model history: " << path << " (valvediag ladder " << a->data.data << ")\n";
+    }
+    exit_code = kOk;
+  });
+}
+
+void add_ladder(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand(
+      "ladder", "Print the model ladder of a data file: each fit, its fitness, the change");
+  cmd->footer("Example:\n  valvediag diagnose loop.csv --auto && valvediag ladder loop.csv");
+  auto data = std::make_shared<std::string>();
+  cmd->add_option("data", *data, "the data file whose history to show")->required();
+  cmd->callback([data, &exit_code] {
+    const std::string path = history_path_for(*data);
+    const auto entries = load_history(path);
+    if (entries.empty())
+      throw UsageError("no model history for " + *data + " (" + path +
+                       "): run 'valvediag diagnose " + *data + " --auto' or 'valvediag fit " +
+                       *data + " --model SPEC' first");
+    std::cout << format_ladder(entries);
+    exit_code = kOk;
+  });
+}
+
+}  // namespace valvediag::cli

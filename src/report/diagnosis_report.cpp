@@ -1,0 +1,188 @@
+#include "valvediag/diagnosis_report.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+namespace valvediag {
+
+namespace {
+
+std::string num(double v, int prec = 2) {
+  if (!std::isfinite(v)) return "n/a";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", prec, v);
+  return buf;
+}
+
+std::string signed_num(double v) {
+  if (!std::isfinite(v)) return "n/a";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%+.2f", v);
+  return buf;
+}
+
+double t_at(const std::vector<double>& t, std::size_t k) {
+  return k < t.size() ? t[k] : static_cast<double>(k);
+}
+
+std::string params(const std::vector<NamedValue>& p) {
+  std::string s;
+  for (const auto& v : p) {
+    if (!s.empty()) s += ", ";
+    s += v.name + " " + num(v.value, 3) + (v.unit.empty() ? "" : " " + v.unit);
+  }
+  return s;
+}
+
+nlohmann::json num_json(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+}
+
+}  // namespace
+
+std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
+  std::ostringstream o;
+  if (d.steps.size() > 1) {
+    o << "ladder (climbed with --auto):\n";
+    for (std::size_t i = 0; i < d.steps.size(); ++i) {
+      const auto& f = d.steps[i].fit;
+      o << "  " << i + 1 << ". " << to_string(f.spec) << ": " << num(f.fitness_percent)
+        << " % estimation, " << num(f.validation_fitness_percent) << " % validation";
+      if (i > 0)
+        o << " ("
+          << signed_num(f.validation_fitness_percent -
+                        d.steps[i - 1].fit.validation_fitness_percent)
+          << ")";
+      o << "\n";
+    }
+  }
+  const auto& s = d.last();
+  o << "model:     " << to_string(s.fit.spec) << " (na " << s.fit.structure.na << ", nb "
+    << s.fit.structure.nb << ", nk " << s.fit.structure.nk << "): " << num(s.fit.fitness_percent)
+    << " % estimation, " << num(s.fit.validation_fitness_percent) << " % validation\n";
+  for (const auto& e : s.fit.effects)
+    if (!e.parameters.empty()) o << "           " << e.name << ": " << params(e.parameters) << "\n";
+  o << "residual:  RMS " << num(s.residual.rms, 3) << ", white-noise level "
+    << num(s.residual.noise_level, 3) << "\n";
+  o << "findings (most likely missing first):\n";
+  o << "  rank  effect          score  gain (val / est)      evidence\n";
+  int rank = 0;
+  for (const auto& f : s.findings) {
+    char line[256];
+    std::snprintf(line, sizeof line, "  %-4d  %-14s  %5.2f  %+7.2f / %+7.2f    %s %s\n", ++rank,
+                  f.effect.c_str(), f.score, f.validation_gain_percent, f.estimation_gain_percent,
+                  f.evidence_test.empty() ? "-" : f.evidence_test.c_str(),
+                  f.evidence_test.empty() ? "" : num(f.evidence).c_str());
+    o << line;
+  }
+  if (!s.findings.empty() && !s.findings.front().supported) {
+    o << "first:     no effect is clearly missing: the best candidate, `"
+      << s.findings.front().effect << "`, gains too little to be worth its parameters\n";
+  } else if (!s.findings.empty()) {
+    const auto& f = s.findings.front();
+    o << "first:     " << f.explanation << "\n";
+    if (!f.indistinguishable_from.empty())
+      o << "           `" << f.effect << "` and `" << f.indistinguishable_from
+        << "` explain this data equally well: the data cannot tell them apart\n";
+    for (const auto& iv : f.intervals)
+      o << "           fails at t " << num(t_at(t, iv.begin), 1) << " .. "
+        << num(t_at(t, iv.end - 1), 1) << " s (" << num(100 * iv.share, 0) << " % of the error)\n";
+    for (const auto& g : f.regions)
+      o << "           " << g.label << " carries " << num(100 * g.share, 0) << " % of the error\n";
+  }
+  o << "verdict:   " << verdict(d) << "\n";
+  o << d.conclusion << "\n";
+  return o.str();
+}
+
+nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) {
+  using nlohmann::json;
+  const auto& s = d.last();
+  json j;
+  j["model"] = to_string(s.fit.spec);
+  j["fitness_percent"] = num_json(s.fit.fitness_percent);
+  j["validation_fitness_percent"] = num_json(s.fit.validation_fitness_percent);
+  j["structure"] = {
+      {"na", s.fit.structure.na}, {"nb", s.fit.structure.nb}, {"nk", s.fit.structure.nk}};
+  json eff = json::array();
+  for (const auto& e : s.fit.effects) {
+    json p = json::object();
+    for (const auto& v : e.parameters) p[v.name] = v.value;
+    eff.push_back({{"effect", e.name}, {"variant", e.variant}, {"parameters", p}});
+  }
+  j["effects"] = eff;
+  j["verdict"] = verdict(d);
+  for (const auto& e : s.fit.effects)
+    if (e.name == "stiction") {
+      json st = json::object();
+      for (const auto& v : e.parameters) st[v.name + "_percent"] = v.value;
+      j["stiction"] = st;
+    }
+  json findings = json::array();
+  for (const auto& f : s.findings) {
+    json where;
+    where["intervals"] = json::array();
+    for (const auto& iv : f.intervals)
+      where["intervals"].push_back({{"t_begin_s", t_at(t, iv.begin)},
+                                    {"t_end_s", t_at(t, iv.end - 1)},
+                                    {"begin_sample", iv.begin},
+                                    {"end_sample", iv.end},
+                                    {"share", iv.share}});
+    where["regions"] = json::array();
+    for (const auto& g : f.regions)
+      where["regions"].push_back(
+          {{"kind", g.kind}, {"label", g.label}, {"share", g.share}, {"excess", g.excess}});
+    json p = json::object();
+    for (const auto& v : f.parameters) p[v.name] = v.value;
+    findings.push_back({{"effect", f.effect},
+                        {"score", f.score},
+                        {"validation_gain_percent", num_json(f.validation_gain_percent)},
+                        {"estimation_gain_percent", num_json(f.estimation_gain_percent)},
+                        {"evidence", f.evidence},
+                        {"evidence_test", f.evidence_test},
+                        {"parameters", p},
+                        {"where", where},
+                        {"explanation", f.explanation},
+                        {"supported", f.supported},
+                        {"indistinguishable_from", f.indistinguishable_from},
+                        {"trial_model", to_string(f.trial_spec)}});
+  }
+  j["findings"] = findings;
+  json ladder = json::array();
+  for (const auto& st : d.steps)
+    ladder.push_back({{"model", to_string(st.fit.spec)},
+                      {"fitness_percent", num_json(st.fit.fitness_percent)},
+                      {"validation_fitness_percent", num_json(st.fit.validation_fitness_percent)}});
+  j["ladder"] = ladder;
+  j["residual"] = {{"rms", s.residual.rms}, {"noise_level", s.residual.noise_level}};
+  j["conclusion"] = d.conclusion;
+  return j;
+}
+
+std::string format_ladder(const std::vector<HistoryEntry>& entries) {
+  std::ostringstream o;
+  char line[512];
+  std::snprintf(line, sizeof line, "%-4s  %-28s  %10s  %10s  %8s  %s\n", "step", "model",
+                "estimation", "validation", "change", "parameters that matter");
+  o << line;
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    const auto& e = entries[i];
+    std::string change;
+    if (i > 0) {
+      const auto& p = entries[i - 1];
+      const bool val = std::isfinite(e.validation_fitness_percent) &&
+                       std::isfinite(p.validation_fitness_percent);
+      change = val ? signed_num(e.validation_fitness_percent - p.validation_fitness_percent)
+                   : signed_num(e.fitness_percent - p.fitness_percent);
+    }
+    std::snprintf(line, sizeof line, "%-4zu  %-28s  %9s%%  %9s%%  %8s  %s\n", i + 1,
+                  e.model.c_str(), num(e.fitness_percent).c_str(),
+                  num(e.validation_fitness_percent).c_str(), change.c_str(),
+                  params(e.parameters).c_str());
+    o << line;
+  }
+  return o.str();
+}
+
+}  // namespace valvediag

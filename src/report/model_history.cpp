@@ -1,0 +1,114 @@
+#include "valvediag/model_history.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+namespace valvediag {
+
+std::string history_path_for(const std::string& data_path) {
+  return data_path + ".history.json";
+}
+
+namespace {
+
+nlohmann::json num(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+}
+double num_of(const nlohmann::json& j) {
+  return j.is_number() ? j.get<double>() : std::nan("");
+}
+
+std::string utc_now() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+}  // namespace
+
+std::vector<HistoryEntry> load_history(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) return {};
+  std::vector<HistoryEntry> out;
+  try {
+    const auto j = nlohmann::json::parse(f);
+    for (const auto& e : j.at("entries")) {
+      HistoryEntry h;
+      h.model = e.at("model").get<std::string>();
+      h.fitness_percent = num_of(e.value("fitness_percent", nlohmann::json()));
+      h.validation_fitness_percent =
+          num_of(e.value("validation_fitness_percent", nlohmann::json()));
+      for (const auto& p : e.value("parameters", nlohmann::json::array()))
+        h.parameters.push_back(
+            {p.at("name").get<std::string>(), p.at("value").get<double>(), p.value("unit", "")});
+      h.na = e.value("na", 0);
+      h.nb = e.value("nb", 0);
+      h.nk = e.value("nk", 0);
+      h.command = e.value("command", "");
+      h.time = e.value("time", "");
+      out.push_back(std::move(h));
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(path + ": not a valvediag model history (" + std::string(e.what()) +
+                             "); move it away to start a new history");
+  }
+  return out;
+}
+
+void append_history(const std::string& path, const std::vector<HistoryEntry>& entries) {
+  auto all = load_history(path);
+  all.insert(all.end(), entries.begin(), entries.end());
+  nlohmann::json j;
+  j["format"] = "valvediag model history 1";
+  j["entries"] = nlohmann::json::array();
+  for (const auto& h : all) {
+    nlohmann::json p = nlohmann::json::array();
+    for (const auto& v : h.parameters)
+      p.push_back({{"name", v.name}, {"value", v.value}, {"unit", v.unit}});
+    j["entries"].push_back({{"model", h.model},
+                            {"fitness_percent", num(h.fitness_percent)},
+                            {"validation_fitness_percent", num(h.validation_fitness_percent)},
+                            {"parameters", p},
+                            {"na", h.na},
+                            {"nb", h.nb},
+                            {"nk", h.nk},
+                            {"command", h.command},
+                            {"time", h.time}});
+  }
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary);
+    if (!f)
+      throw std::runtime_error("cannot write the model history " + tmp +
+                               ": is the data's folder writable?");
+    f << j.dump(2) << "\n";
+    if (!f) throw std::runtime_error("writing the model history " + tmp + " failed (disk full?)");
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0)
+    throw std::runtime_error("cannot replace the model history " + path);
+}
+
+HistoryEntry history_entry(const ModelFit& fit, const std::string& command) {
+  HistoryEntry h;
+  h.model = to_string(fit.spec);
+  h.fitness_percent = fit.fitness_percent;
+  h.validation_fitness_percent = fit.validation_fitness_percent;
+  for (const auto& e : fit.effects)
+    for (const auto& p : e.parameters)
+      h.parameters.push_back({e.name + "." + p.name, p.value, p.unit});
+  h.na = fit.structure.na;
+  h.nb = fit.structure.nb;
+  h.nk = fit.structure.nk;
+  h.command = command;
+  h.time = utc_now();
+  return h;
+}
+
+}  // namespace valvediag
