@@ -14,4 +14,10 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t);
 nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t);
 std::string format_ladder(const std::vector<HistoryEntry>& entries);
 
+// A fit of a composable model (fit --model/--add/--remove): summary and JSON.
+std::string format_model_fit(const ModelFit& f, const ResidualAnalysis& where,
+                             const std::vector<double>& t);
+nlohmann::json model_fit_json(const ModelFit& f, const ResidualAnalysis& where,
+                              const std::vector<double>& t);
+
 }  // namespace valvediag

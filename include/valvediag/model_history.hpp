@@ -27,5 +27,7 @@ std::vector<HistoryEntry> load_history(const std::string& path);
 // Appends and rewrites the file (atomically: a temporary file renamed over it).
 void append_history(const std::string& path, const std::vector<HistoryEntry>& entries);
 HistoryEntry history_entry(const ModelFit& fit, const std::string& command);
+// Now, UTC, ISO 8601 (the entries' time stamps).
+std::string utc_timestamp();
 
 }  // namespace valvediag

@@ -8,7 +8,11 @@
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/data_checks.hpp"
+#include "valvediag/diagnosis_report.hpp"
 #include "valvediag/fit_report.hpp"
+#include "valvediag/model_fit.hpp"
+#include "valvediag/model_history.hpp"
+#include "valvediag/residual_analysis.hpp"
 
 namespace valvediag::cli {
 
@@ -27,6 +31,9 @@ struct FitArgs {
   std::string json, series;
   bool no_merge = false;
   std::string db, loop, from, to;  // a recorded loop instead of a CSV file
+  std::string model;               // a composable model instead of the Preisach identification
+  std::vector<std::string> add, remove;
+  bool no_history = false;
 };
 
 // "0.3": the last 30 % held out; "t=600" or "600s": samples from t >= 600 s held out;
@@ -79,6 +86,52 @@ std::size_t validation_start(LoopData& d, const std::string& spec, FitOptions& f
 }
 
 }  // namespace
+
+// fit --model/--add/--remove: a composable model, relative to the data's model history.
+int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
+             const std::string& history) {
+  ModelSpec spec = parse_model_spec("linear");
+  if (!a.model.empty()) {
+    spec = parse_model_spec(a.model);
+  } else {
+    const auto h = load_history(history);
+    if (!h.empty()) spec = parse_model_spec(h.back().model);
+    std::cout << "note: starting from the last model of this data: " << to_string(spec)
+              << (h.empty() ? " (no history yet)" : "") << "\n";
+  }
+  for (const auto& e : a.add) spec = add_effect(spec, e);
+  for (const auto& e : a.remove) spec = remove_effect(spec, e);
+  if (a.output == "mv")
+    throw UsageError("--output mv goes with the Preisach identification, not with --model");
+  check_identifiable_data(d, 200, "model " + to_string(spec));
+  ModelFitOptions mo;
+  mo.validation_fraction = fo.validation_fraction;
+  mo.validation_start = fo.validation_start;
+  const ModelFit f = fit_model(d.op, d.pv, d.sample_period(), spec, mo);
+  ResidualAnalysis where;
+  if (f.status != ModelFitStatus::NoStableModel) {
+    ResidualAnalysisOptions ro;
+    ro.model_delay = static_cast<std::size_t>(std::max(0, f.structure.nk + 1));
+    where = analyse_residual(d.op, d.pv, f.y_sim, f.first_sample, f.estimation_end, ro);
+  }
+  std::cout << format_model_fit(f, where, d.t);
+  if (!a.json.empty()) {
+    write_text(a.json, model_fit_json(f, where, d.t).dump(2) + "\n");
+    std::cout << "wrote " << a.json << "\n";
+  }
+  if (!a.series.empty() && f.status != ModelFitStatus::NoStableModel) {
+    std::vector<double> res(d.size());
+    for (std::size_t k = 0; k < d.size(); ++k) res[k] = d.pv[k] - f.y_sim[k];
+    write_columns_csv(a.series, {"t", "op", "pv", "x_hat", "pv_sim", "residual"},
+                      {d.t, d.op, d.pv, f.x_hat, f.y_sim, res});
+    std::cout << "wrote " << a.series << "\n";
+  }
+  if (!a.no_history && f.status != ModelFitStatus::NoStableModel) {
+    append_history(history, {history_entry(f, "fit")});
+    std::cout << "model history: " << history << "\n";
+  }
+  return f.status == ModelFitStatus::NoStableModel ? kNoModel : kOk;
+}
 
 void add_fit(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand("fit", "Identify a Preisach-Hammerstein model from OP/PV data");
@@ -201,6 +254,18 @@ void add_fit(CLI::App& app, int& exit_code) {
       ->group(g_v)
       ->capture_default_str();
   cmd->add_option("--json", a->json, "write the result as JSON")->group(g_v);
+  const char* g_e = "Composable models (effects.md)";
+  cmd->add_option("--model", a->model,
+                  "fit this chain of effects, e.g. stiction+saturation, linear")
+      ->group(g_e);
+  cmd->add_option("--add", a->add,
+                  "add an effect to the last model of this data (see valvediag ladder)")
+      ->group(g_e);
+  cmd->add_option("--remove", a->remove, "remove an effect from the last model of this data")
+      ->group(g_e);
+  cmd->add_flag("--no-history", a->no_history,
+                "do not add this fit to the model history next to the data")
+      ->group(g_e);
   cmd->add_option("--series-out", a->series, "write t, op, pv, x_hat, pv_sim, residual as CSV")
       ->group(g_v);
 
@@ -246,7 +311,28 @@ void add_fit(CLI::App& app, int& exit_code) {
                        ": --output mv needs a valve position column (name it with --mv COLUMN)");
     if (auto msg = validate(fo); !msg.empty()) throw UsageError(msg);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
+    const std::string history = history_path_for(a->data.empty() ? a->db + "." + a->loop : a->data);
+    if (!a->model.empty() || !a->add.empty() || !a->remove.empty()) {
+      exit_code = fit_spec(d, *a, fo, history);
+      return;
+    }
     FitRun run = run_fit(d, fo, a->output);
+    if (!a->no_history && run.result.status == IdentificationStatus::Ok) {
+      HistoryEntry h;
+      h.model = "preisach";
+      h.fitness_percent = run.result.fitness_percent;
+      h.validation_fitness_percent = run.result.validation_fitness_percent;
+      const auto& st = run.result.best.structure;
+      h.na = st.na;
+      h.nb = st.nb;
+      h.nk = st.nk;
+      h.parameters.push_back({"preisach.L", static_cast<double>(st.L), ""});
+      h.parameters.push_back(
+          {"preisach.nonzero_weights", static_cast<double>(run.result.best.nonzero_weights), ""});
+      h.command = "fit";
+      h.time = utc_timestamp();
+      append_history(history, {h});
+    }
     std::cout << run.summary;
     if (!a->json.empty()) {
       write_text(a->json, run.json.dump(2) + "\n");

@@ -185,4 +185,76 @@ std::string format_ladder(const std::vector<HistoryEntry>& entries) {
   return o.str();
 }
 
+std::string format_model_fit(const ModelFit& f, const ResidualAnalysis& where,
+                             const std::vector<double>& t) {
+  std::ostringstream o;
+  o << "model:     " << to_string(f.spec) << " (na " << f.structure.na << ", nb " << f.structure.nb
+    << ", nk " << f.structure.nk << (f.integrating ? ", integrating" : "") << ")\n";
+  for (const auto& e : f.effects)
+    if (!e.parameters.empty())
+      o << "           " << e.name << (e.variant.empty() ? "" : " (" + e.variant + ")") << ": "
+        << params(e.parameters) << "\n";
+  o << "fitness:   " << num(f.fitness_percent) << " % on estimation data";
+  if (std::isfinite(f.validation_fitness_percent))
+    o << ", " << num(f.validation_fitness_percent) << " % on validation data";
+  o << " (simulated output, eq 20)\n";
+  o << "where it fails: residual RMS " << num(where.rms, 3) << ", white-noise level "
+    << num(where.noise_level, 3) << "\n";
+  std::size_t shown = 0;
+  for (const auto& iv : where.intervals) {
+    if (shown++ == 3) break;
+    o << "           t " << num(t_at(t, iv.begin), 1) << " .. " << num(t_at(t, iv.end - 1), 1)
+      << " s: " << num(100 * iv.share, 0) << " % of the squared error\n";
+  }
+  for (const auto& test : where.tests)
+    if (test.score >= 0.3) {
+      o << "           " << test.name << " " << num(test.score) << " -> ";
+      for (std::size_t i = 0; i < test.effects.size(); ++i) o << (i ? ", " : "") << test.effects[i];
+      o << "\n";
+    }
+  o << "solver:    " << to_string(f.status) << " (" << f.stop_reason << "), " << f.evaluations
+    << " evaluations, " << num(f.elapsed_s, 2) << " s\n";
+  return o.str();
+}
+
+nlohmann::json model_fit_json(const ModelFit& f, const ResidualAnalysis& where,
+                              const std::vector<double>& t) {
+  using nlohmann::json;
+  json j;
+  j["model"] = to_string(f.spec);
+  j["structure"] = {{"na", f.structure.na}, {"nb", f.structure.nb}, {"nk", f.structure.nk}};
+  j["integrating"] = f.integrating;
+  j["fitness_percent"] = num_json(f.fitness_percent);
+  j["validation_fitness_percent"] = num_json(f.validation_fitness_percent);
+  j["a"] = f.a;
+  j["b"] = f.b;
+  j["c"] = f.c;
+  json eff = json::array();
+  for (const auto& e : f.effects) {
+    json p = json::object();
+    for (const auto& v : e.parameters) p[v.name] = v.value;
+    eff.push_back({{"effect", e.name}, {"variant", e.variant}, {"parameters", p}});
+  }
+  j["effects"] = eff;
+  json iv = json::array();
+  for (const auto& i : where.intervals)
+    iv.push_back({{"t_begin_s", t_at(t, i.begin)},
+                  {"t_end_s", t_at(t, i.end - 1)},
+                  {"share", i.share},
+                  {"rms", i.rms}});
+  json ts = json::array();
+  for (const auto& x : where.tests)
+    ts.push_back(
+        {{"name", x.name}, {"effects", x.effects}, {"score", x.score}, {"detail", x.detail}});
+  j["where"] = {{"residual_rms", where.rms},
+                {"noise_level", where.noise_level},
+                {"intervals", iv},
+                {"tests", ts}};
+  j["solver"] = {{"status", to_string(f.status)},
+                 {"stop_reason", f.stop_reason},
+                 {"evaluations", f.evaluations}};
+  j["elapsed_s"] = f.elapsed_s;
+  return j;
+}
+
 }  // namespace valvediag

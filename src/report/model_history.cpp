@@ -22,7 +22,9 @@ double num_of(const nlohmann::json& j) {
   return j.is_number() ? j.get<double>() : std::nan("");
 }
 
-std::string utc_now() {
+}  // namespace
+
+std::string utc_timestamp() {
   const std::time_t t = std::time(nullptr);
   std::tm tm{};
   gmtime_r(&t, &tm);
@@ -30,8 +32,6 @@ std::string utc_now() {
   std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
   return buf;
 }
-
-}  // namespace
 
 std::vector<HistoryEntry> load_history(const std::string& path) {
   std::ifstream f(path);
@@ -107,7 +107,7 @@ HistoryEntry history_entry(const ModelFit& fit, const std::string& command) {
   h.nb = fit.structure.nb;
   h.nk = fit.structure.nk;
   h.command = command;
-  h.time = utc_now();
+  h.time = utc_timestamp();
   return h;
 }
 

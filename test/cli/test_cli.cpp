@@ -203,3 +203,30 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   CHECK(none.status == 2);
   CHECK(none.out.find("diagnose") != std::string::npos);
 }
+
+TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
+  REQUIRE(run("simulate --scenario deadband --seed 2 --out " + tmp("db.csv")).status == 0);
+  std::remove((tmp("db.csv") + ".history.json").c_str());
+  auto lin =
+      run("fit " + tmp("db.csv") + " --model linear --validate 0.3 --json " + tmp("lin.json"));
+  REQUIRE(lin.status == 0);
+  auto add =
+      run("fit " + tmp("db.csv") + " --add deadband --validate 0.3 --json " + tmp("db.json"));
+  REQUIRE(add.status == 0);
+  CHECK(add.out.find("starting from the last model of this data: linear") != std::string::npos);
+  std::ifstream f1(tmp("lin.json")), f2(tmp("db.json"));
+  const auto j1 = nlohmann::json::parse(f1), j2 = nlohmann::json::parse(f2);
+  CHECK(j2["model"] == "deadband");
+  CHECK(j2["effects"][0]["parameters"]["d"].get<double>() == doctest::Approx(4.0).epsilon(0.25));
+  // The error falls: the effect that is really there raises validation fitness clearly.
+  CHECK(j2["validation_fitness_percent"].get<double>() >
+        j1["validation_fitness_percent"].get<double>() + 10.0);
+  auto rem = run("fit " + tmp("db.csv") + " --remove deadband --validate 0.3");
+  CHECK(rem.status == 0);
+  CHECK(rem.out.find("model:     linear") != std::string::npos);
+  auto l = run("ladder " + tmp("db.csv"));
+  CHECK(l.status == 0);
+  CHECK(l.out.find("deadband.d") != std::string::npos);
+  CHECK(run("fit " + tmp("db.csv") + " --remove stiction").status == 2);  // not in the model
+  CHECK(run("fit " + tmp("db.csv") + " --add wobble").status == 2);
+}
