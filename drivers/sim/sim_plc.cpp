@@ -118,7 +118,7 @@ struct SimPlc::Impl {
   }
 
   void simulate() {
-    const auto t0 = Clock::now();
+    const auto t0 = started;
     while (running) {
       Clock::time_point next = Clock::time_point::max();
       for (auto& l : loops) {
@@ -139,7 +139,6 @@ struct SimPlc::Impl {
     ctx = modbus_new_tcp("127.0.0.1", port);
     if (!ctx) throw std::runtime_error("cannot create the libmodbus server context");
     modbus_set_indication_timeout(ctx, 1, 0);  // a half-sent request never stalls the server
-    if (getenv("VD_DEBUG")) modbus_set_debug(ctx, 1);
     listen_fd = modbus_tcp_listen(ctx, 16);
     if (listen_fd < 0) {
       const int err = errno;
@@ -370,6 +369,10 @@ void SimPlc::stop() {
 
 int SimPlc::port() const {
   return impl_->port;
+}
+
+std::chrono::steady_clock::time_point SimPlc::started() const {
+  return impl_->started;
 }
 
 void SimPlc::attach_can(int fd) {

@@ -9,6 +9,7 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -37,6 +38,8 @@ class SimPlc {
   void start();
   void stop();
   int port() const;  // the bound port (after start)
+  // When step 0 was published; step k of a loop comes k * Ts / speed later.
+  std::chrono::steady_clock::time_point started() const;
 
   // CAN frames of the socketcan loops are written to `fd` (struct can_frame each) at every
   // simulation step. The fd stays owned by the caller.

@@ -2,6 +2,7 @@
 // (sticky valve) over Modbus TCP on a free loopback port, the recorder records it through the
 // real Modbus driver at accelerated speed, the recording is exported and fitted.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -96,10 +97,15 @@ void add_demo(CLI::App& app, int& exit_code) {
       std::cout << "1. simulated PLC on 127.0.0.1:" << plc.port()
                 << ": loop FIC101 = " << s.description << ", running " << a->speed
                 << "x real time\n";
-      // Poll half a PLC cycle after its steps, so every read sees exactly one new sample.
-      std::this_thread::sleep_for(std::chrono::duration<double>(period / 2));
       RecorderOptions o;
       o.db_path = db;
+      // Polls half a PLC cycle after its steps, so every read sees exactly one new sample; the
+      // first a moment from now, once the recorder is set up.
+      const auto P = std::chrono::duration<double>(period);
+      const double k0 = std::ceil(
+          (std::chrono::steady_clock::now() + std::chrono::milliseconds(300) - plc.started()) / P);
+      o.start = plc.started() +
+                std::chrono::duration_cast<std::chrono::steady_clock::duration>((k0 + 0.5) * P);
       o.duration_s = static_cast<double>(a->samples) * period;
       std::cout << "2. recording " << a->samples << " samples (" << a->samples * Ts
                 << " s of plant time) through the Modbus TCP driver, every " << period * 1e3

@@ -157,7 +157,12 @@ struct Recorder::Impl {
         account(l, next_li, r, "recorder fell behind: tick not polled in time");
       }
       lock.unlock();
-      const LoopValues v = w.bus->read(l.bus_index);
+      LoopValues v;
+      try {
+        v = w.bus->read(l.bus_index);
+      } catch (const std::exception& e) {  // drivers report by quality; this is a last guard
+        v.error = std::string("driver failure: ") + e.what();
+      }
       lock.lock();
       SampleRow r;
       r.loop_id = l.db_id;
@@ -264,7 +269,7 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
   for (auto& l : m.loops) l.db_id = m.db->add_loop(m.run, l.cfg);
 
   std::atomic<bool> done{false};
-  const auto t0 = Clock::now();
+  const auto t0 = m.opt.start.value_or(Clock::now());
   std::atomic<int> running{static_cast<int>(m.workers.size())};
   for (auto& w : m.workers)
     w.thread = std::thread([&m, &w, t0, &stop, &done, &running] {

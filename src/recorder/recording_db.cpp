@@ -230,13 +230,13 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
   };
   RecordedLoop out;
   std::int64_t loop_id = 0;
-  bool has_sp = false;
+  bool has_sp = false, has_mv = false;
   {
     sqlite3_stmt* s = prepare(
-        run > 0
-            ? "SELECT id, run_id, sample_period, has_sp FROM loops WHERE name = ? AND run_id = ?"
-            : "SELECT id, run_id, sample_period, has_sp FROM loops WHERE name = ? "
-              "ORDER BY run_id DESC LIMIT 1");
+        run > 0 ? "SELECT id, run_id, sample_period, has_sp, has_mv FROM loops WHERE name = ? AND "
+                  "run_id = ?"
+                : "SELECT id, run_id, sample_period, has_sp, has_mv FROM loops WHERE name = ? "
+                  "ORDER BY run_id DESC LIMIT 1");
     sqlite3_bind_text(s, 1, name.c_str(), -1, SQLITE_TRANSIENT);
     if (run > 0) sqlite3_bind_int64(s, 2, run);
     const bool found = sqlite3_step(s) == SQLITE_ROW;
@@ -245,6 +245,7 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
       out.run = sqlite3_column_int64(s, 1);
       out.sample_period = sqlite3_column_double(s, 2);
       has_sp = sqlite3_column_int(s, 3) != 0;
+      has_mv = sqlite3_column_int(s, 4) != 0;
     }
     sqlite3_finalize(s);
     if (!found) {
@@ -264,7 +265,8 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
   const std::int64_t last = to_s ? static_cast<std::int64_t>(std::floor(*to_s / P + 1e-9))
                                  : std::numeric_limits<std::int64_t>::max();
   sqlite3_stmt* s = prepare(
-      "SELECT tick, op, pv, sp, q_op, q_pv, q_sp FROM samples WHERE loop_id = ? AND tick >= ? "
+      "SELECT tick, op, pv, sp, q_op, q_pv, q_sp, mv, q_mv FROM samples WHERE loop_id = ? AND tick "
+      ">= ? "
       "AND tick <= ? ORDER BY tick");
   sqlite3_bind_int64(s, 1, loop_id);
   sqlite3_bind_int64(s, 2, first);
@@ -277,7 +279,9 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
   std::vector<std::int64_t> ticks;
   std::vector<double> op, pv, sp;
   bool sp_ok = has_sp;
-  std::size_t sp_bad = 0;
+  std::size_t sp_bad = 0, mv_bad = 0;
+  bool mv_ok = has_mv;
+  std::vector<double> mv;
   std::int64_t prev = first - 1;
   auto add_gap = [&](std::int64_t a, std::int64_t b, int q) {
     if (!gaps.empty() && gaps.back().b + 1 == a)
@@ -303,6 +307,13 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
         ++sp_bad;
       }
       sp.push_back(sqlite3_column_double(s, 3));
+    }
+    if (has_mv) {
+      if (sqlite3_column_int(s, 8) != 0) {
+        mv_ok = false;
+        ++mv_bad;
+      }
+      mv.push_back(sqlite3_column_double(s, 7));
     }
   }
   sqlite3_finalize(s);
@@ -348,6 +359,7 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     cut(op);
     cut(pv);
     cut(sp);
+    cut(mv);
     cut(ticks);
     out.notes.push_back("the range has " + std::to_string(gaps.size()) + " gap(s) (" + list +
                         "); using the longest clean stretch, " + stretch);
@@ -363,6 +375,9 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
   if (has_sp && sp_ok) d.sp = std::move(sp);
   if (has_sp && !sp_ok)
     out.notes.push_back("sp left out: " + std::to_string(sp_bad) + " tick(s) without a good sp");
+  if (has_mv && mv_ok) d.mv = std::move(mv);
+  if (has_mv && !mv_ok)
+    out.notes.push_back("mv left out: " + std::to_string(mv_bad) + " tick(s) without a good mv");
   return out;
 }
 

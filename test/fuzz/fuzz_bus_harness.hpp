@@ -108,10 +108,10 @@ inline std::string run_codec(std::string_view in) {
   }
   const std::int64_t r = can_signal_raw(s, data);
   if (s.length < 64) {
-    const double lim = std::ldexp(1.0, static_cast<int>(s.length));
-    const double v = static_cast<double>(r);
-    if (s.is_signed ? (v < -lim / 2 || v >= lim / 2) : (v < 0 || v >= lim))
-      return "CAN raw value outside its bit range";
+    // In integers: a double would round 2^57 - 1 up to 2^57.
+    const bool ok = s.is_signed ? ((r >> (s.length - 1)) == 0 || (r >> (s.length - 1)) == -1)
+                                : (r >= 0 && (static_cast<std::uint64_t>(r) >> s.length) == 0);
+    if (!ok) return "CAN raw value outside its bit range";
   }
   if (s.length <= 52) {  // exact in a double
     std::uint8_t copy[8];

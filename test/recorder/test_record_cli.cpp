@@ -197,3 +197,32 @@ TEST_CASE("record exits 4 when errors happened, 0 when not; export and fit read 
   CHECK(r.out.find("Slave device or server failure") != std::string::npos);
   CHECK(plc.write_requests() == 0);
 }
+
+TEST_CASE("sim-plc prints its free port, serves the recorder, and reports the function codes") {
+  const fs::path out = kTmp / "simplc.txt";
+  fs::remove(out);  // else the port of an earlier run may be read before the child truncates it
+  const pid_t pid = spawn({VALVEDIAG_BIN, "sim-plc", "--config", kSimSite, "--port", "0", "--speed",
+                           "10", "--duration", "4s"},
+                          out);
+  int port = 0;
+  REQUIRE(test::wait_for(
+      [&] {
+        std::ifstream f(out);
+        std::string line;
+        while (std::getline(f, line))
+          if (line.rfind("port ", 0) == 0) port = std::stoi(line.substr(5));
+        return port > 0;
+      },
+      10.0));
+  const std::string site = write_site("simplc.toml", port, 0.05);
+  const Result r = run(
+      {"record", "--config", site, "--db", fresh("simplc.sqlite"), "--duration", "1s", "--quiet"});
+  CHECK(r.out.find("FIC101: 20 samples") != std::string::npos);
+  CHECK(wait_child(pid, 15.0) == 0);
+  std::ifstream f(out);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  INFO(ss.str());
+  CHECK(ss.str().find("requests by function code: 3:") != std::string::npos);
+  CHECK(ss.str().find("write requests (refused): 0") != std::string::npos);
+}
