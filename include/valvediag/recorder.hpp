@@ -111,8 +111,9 @@ using BusFactory =
 
 class Recorder {
  public:
-  // Checks the loop selection against the site and opens (creates) the database; throws
-  // std::invalid_argument for an unknown loop name, std::runtime_error for database problems.
+  // Checks the loop selection against the site, builds the buses through `factory`, then opens
+  // (creates) the database; throws std::invalid_argument for an unknown loop name,
+  // std::runtime_error when a bus cannot exist (no SocketCAN) or the database cannot be opened.
   // Nothing is sent on any bus before run().
   Recorder(SiteConfig site, RecorderOptions options, BusFactory factory);
   ~Recorder();

@@ -95,7 +95,13 @@ void add_record(CLI::App& app, int& exit_code) {
     }
     SiteConfig site = load_site_config(a->config);  // every config error before any traffic
     auto& stop = install_stop_signals();
-    Recorder rec(std::move(site), o, make_bus);
+    std::unique_ptr<Recorder> rec_ptr;
+    try {
+      rec_ptr = std::make_unique<Recorder>(std::move(site), o, make_bus);
+    } catch (const std::runtime_error& e) {
+      throw UsageError(e.what());  // no SocketCAN, database not writable: nothing recorded
+    }
+    Recorder& rec = *rec_ptr;
     const bool tty = ::isatty(2) != 0;
     std::cerr << "recording into " << a->db << "; Ctrl-C stops\n";
     const RecorderStatus s = rec.run(stop, [&](const RecorderStatus& st) {

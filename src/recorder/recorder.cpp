@@ -239,19 +239,8 @@ Recorder::Recorder(SiteConfig site, RecorderOptions options, BusFactory factory)
     c.name = l.name;
     m.counts.push_back(c);
   }
-  m.db = std::make_unique<RecordingDb>(m.opt.db_path);
-}
-
-Recorder::~Recorder() = default;
-
-std::int64_t Recorder::run_id() const {
-  return impl_->run;
-}
-
-RecorderStatus Recorder::run(const std::atomic<bool>& stop,
-                             const std::function<void(const RecorderStatus&)>& on_status) {
-  Impl& m = *impl_;
-  // Buses first: a bus that cannot exist at all (no SocketCAN) fails before anything is stored.
+  // Buses before the database: a bus that cannot exist at all (no SocketCAN in the kernel)
+  // fails before any file is created. No request is sent before run().
   for (const auto& b : m.site.buses) {
     BusWorker w;
     std::vector<LoopConfigEntry> on_bus;
@@ -265,6 +254,18 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
     w.bus = m.factory(b, on_bus);
     m.workers.push_back(std::move(w));
   }
+  m.db = std::make_unique<RecordingDb>(m.opt.db_path);
+}
+
+Recorder::~Recorder() = default;
+
+std::int64_t Recorder::run_id() const {
+  return impl_->run;
+}
+
+RecorderStatus Recorder::run(const std::atomic<bool>& stop,
+                             const std::function<void(const RecorderStatus&)>& on_status) {
+  Impl& m = *impl_;
   m.run = m.db->begin_run(m.site.file);
   for (auto& l : m.loops) l.db_id = m.db->add_loop(m.run, l.cfg);
 

@@ -226,3 +226,14 @@ TEST_CASE("sim-plc prints its free port, serves the recorder, and reports the fu
   CHECK(ss.str().find("requests by function code: 3:") != std::string::npos);
   CHECK(ss.str().find("write requests (refused): 0") != std::string::npos);
 }
+
+TEST_CASE("a CAN site on a kernel without SocketCAN: a clear message, exit 2, no file") {
+  const std::string db = fresh("can.sqlite");
+  const Result r = run({"record", "--config", std::string(VALVEDIAG_CONFIG_DIR) + "/can-site.toml",
+                        "--db", db, "--duration", "1s"});
+  INFO(r.out);
+  CHECK(r.status == 2);
+  CHECK((r.out.find("SocketCAN is not available") != std::string::npos ||
+         r.out.find("CAN interface 'can0' not found") != std::string::npos));
+  CHECK(!fs::exists(db));
+}
