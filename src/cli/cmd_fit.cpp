@@ -4,6 +4,7 @@
 #include <iostream>
 
 #include "commands.hpp"
+#include "data_options.hpp"
 #include "fit_runner.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/csv_writer.hpp"
@@ -19,10 +20,7 @@ namespace valvediag::cli {
 namespace {
 
 struct FitArgs {
-  std::string data;
-  CsvOptions csv;
-  std::string sample_period;
-  std::string decimal = ".";
+  DataOptions in;  // the CSV file and its layout (shared with diagnose)
   FitOptions fit;
   std::string method = "joint", stop = "cost", normalization = "nonnegative", memory = "estimate";
   std::string output = "pv";
@@ -148,45 +146,13 @@ void add_fit(CLI::App& app, int& exit_code) {
       "  valvediag fit loop.csv --method alternation --stop parameter --normalization paper-sign   "
       "(the paper)");
   auto a = std::make_shared<FitArgs>();
-  cmd->add_option("data", a->data, "CSV file with columns t, op, pv (optional sp, mv)");
+  add_data_options(cmd, a->in, /*required=*/false);  // or --db below
   auto* g_in = "Input";
   cmd->add_option("--db", a->db, "a recording (valvediag record) instead of a CSV file")
       ->group(g_in);
   cmd->add_option("--loop", a->loop, "the recorded loop to fit (with --db)")->group(g_in);
   cmd->add_option("--from", a->from, "with --db: start, s from the recording's start")->group(g_in);
   cmd->add_option("--to", a->to, "with --db: end, s from the recording's start")->group(g_in);
-  cmd->add_option("--t", a->csv.t_column,
-                  "time column name or 1-based index ('none': no time column)")
-      ->group(g_in)
-      ->capture_default_str();
-  cmd->add_option("--op", a->csv.op_column, "controller output column")
-      ->group(g_in)
-      ->capture_default_str();
-  cmd->add_option("--pv", a->csv.pv_column, "process variable column")
-      ->group(g_in)
-      ->capture_default_str();
-  cmd->add_option("--sp", a->csv.sp_column, "set point column ('none' to ignore)")->group(g_in);
-  cmd->add_option("--mv", a->csv.mv_column, "measured valve position column ('none' to ignore)")
-      ->group(g_in);
-  cmd->add_option("--delimiter", a->csv.delimiter, "',', ';', 'tab', 'space' or 'auto'")
-      ->group(g_in)
-      ->capture_default_str();
-  cmd->add_option("--skip-lines", a->csv.skip_lines, "lines before the header row")->group(g_in);
-  cmd->add_option("--skip-after-header", a->csv.skip_after_header, "lines between header and data")
-      ->group(g_in);
-  cmd->add_option("--time-format", a->csv.time_format,
-                  "'seconds' or a pattern like '%Y-%m-%d %H:%M:%S'")
-      ->group(g_in)
-      ->capture_default_str();
-  cmd->add_option("--decimal", a->decimal, "decimal separator in numbers: '.' or ','")
-      ->check(CLI::IsMember({".", ","}))
-      ->group(g_in)
-      ->capture_default_str();
-  cmd->add_flag("--resample", a->csv.resample, "interpolate irregular sampling onto a uniform grid")
-      ->group(g_in);
-  cmd->add_option("--sample-period", a->sample_period,
-                  "sample period in s (with --resample or without a time column)")
-      ->group(g_in);
 
   auto* g_m = "Model";
   cmd->add_option("--na-max", a->fit.na_max, "largest A order")->group(g_m)->capture_default_str();
@@ -270,24 +236,15 @@ void add_fit(CLI::App& app, int& exit_code) {
       ->group(g_v);
 
   cmd->callback([a, &exit_code] {
-    if (!a->sample_period.empty()) {
-      try {
-        a->csv.sample_period = std::stod(a->sample_period);
-      } catch (const std::exception&) {
-        throw UsageError("--sample-period must be a number of seconds, got '" + a->sample_period +
-                         "'");
-      }
-    }
-    a->csv.decimal = a->decimal[0];
     std::vector<std::string> notes;
-    if (a->output == "mv" && a->csv.mv_column.empty()) a->csv.mv_column = "mv";
-    if (a->data.empty() == a->db.empty())
+    if (a->output == "mv" && a->in.csv.mv_column.empty()) a->in.csv.mv_column = "mv";
+    if (a->in.data.empty() == a->db.empty())
       throw UsageError("give a CSV file or --db site.sqlite --loop NAME (one of them)");
     if (a->db.empty() && (!a->loop.empty() || !a->from.empty() || !a->to.empty()))
       throw UsageError("--loop, --from and --to go with --db");
     LoopData d;
     if (a->db.empty()) {
-      d = read_loop_csv(a->data, a->csv, &notes);
+      d = load_data(a->in, notes);
     } else {
       RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to);
       notes = r.notes;
@@ -307,11 +264,12 @@ void add_fit(CLI::App& app, int& exit_code) {
     if (fo.select_on_validation && a->validate.empty())
       throw UsageError("--select-on validation needs --validate (a fraction or a start time)");
     if (fo.block == LinearBlock::Identity && !d.has_mv())
-      throw UsageError((a->data.empty() ? a->db : a->data) +
+      throw UsageError((a->in.data.empty() ? a->db : a->in.data) +
                        ": --output mv needs a valve position column (name it with --mv COLUMN)");
     if (auto msg = validate(fo); !msg.empty()) throw UsageError(msg);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
-    const std::string history = history_path_for(a->data.empty() ? a->db + "." + a->loop : a->data);
+    const std::string history =
+        history_path_for(a->in.data.empty() ? a->db + "." + a->loop : a->in.data);
     if (!a->model.empty() || !a->add.empty() || !a->remove.empty()) {
       exit_code = fit_spec(d, *a, fo, history);
       return;

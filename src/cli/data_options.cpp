@@ -4,9 +4,10 @@
 
 namespace valvediag::cli {
 
-void add_data_options(CLI::App* cmd, DataOptions& d) {
+void add_data_options(CLI::App* cmd, DataOptions& d, bool required) {
   const char* g = "Input";
-  cmd->add_option("data", d.data, "CSV file with columns t, op, pv (optional sp, mv)")->required();
+  cmd->add_option("data", d.data, "CSV file with columns t, op, pv (optional sp, mv)")
+      ->required(required);
   cmd->add_option("--t", d.csv.t_column,
                   "time column name or 1-based index ('none': no time column)")
       ->group(g)

@@ -19,8 +19,9 @@ struct DataOptions {
   std::string decimal = ".";
 };
 
-// Adds the positional DATA and the input options (group "Input").
-void add_data_options(CLI::App* cmd, DataOptions& d);
+// Adds the positional DATA and the input options (group "Input"). DATA may be optional when the
+// command has another source (fit --db).
+void add_data_options(CLI::App* cmd, DataOptions& d, bool required = true);
 // Reads the data; notes (columns used, time origin, resampling) go to `notes`.
 LoopData load_data(DataOptions& d, std::vector<std::string>& notes);
 
