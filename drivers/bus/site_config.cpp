@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "valvediag/dbc.hpp"
+#include "valvediag/file_position.hpp"
 
 namespace valvediag {
 
@@ -54,32 +55,9 @@ const LoopConfigEntry* SiteConfig::find_loop(std::string_view name) const {
   return nullptr;
 }
 
-namespace {
-std::string message_of(const std::string& file, int line, int column, const std::string& key,
-                       const std::string& problem) {
-  // Appended piece by piece: g++ 12 warns falsely (-Wrestrict) on "literal" + std::string.
-  std::string m = file;
-  if (line > 0) {
-    m += ':';
-    m += std::to_string(line);
-    if (column > 0) {
-      m += ':';
-      m += std::to_string(column);
-    }
-  }
-  m += ": ";
-  if (!key.empty()) {
-    m += key;
-    m += ": ";
-  }
-  m += problem;
-  return m;
-}
-}  // namespace
-
 SiteConfigError::SiteConfigError(std::string file, int line, int column, std::string key,
                                  std::string problem)
-    : std::runtime_error(message_of(file, line, column, key, problem)),
+    : std::runtime_error(file_position_message(file, line, column, key, problem)),
       file_(std::move(file)),
       line_(line),
       key_(std::move(key)) {}

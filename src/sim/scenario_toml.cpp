@@ -12,36 +12,14 @@
 #include <string>
 #include <vector>
 
+#include "valvediag/file_position.hpp"
 #include "valvediag/scenarios.hpp"
 
 namespace valvediag {
 
-namespace {
-// "<file>:<line>:<column>: <key>: <problem>", leaving out the parts that are unknown.
-std::string file_error_message(const std::string& file, int line, int column,
-                               const std::string& key, const std::string& problem) {
-  std::string m = file;
-  if (line > 0) {
-    m += ':';
-    m += std::to_string(line);
-    if (column > 0) {
-      m += ':';
-      m += std::to_string(column);
-    }
-  }
-  m += ": ";
-  if (!key.empty()) {
-    m += key;
-    m += ": ";
-  }
-  m += problem;
-  return m;
-}
-}  // namespace
-
 ScenarioFileError::ScenarioFileError(std::string file, int line, int column, std::string key,
                                      std::string problem)
-    : std::runtime_error(file_error_message(file, line, column, key, problem)),
+    : std::runtime_error(file_position_message(file, line, column, key, problem)),
       file_(std::move(file)),
       line_(line),
       column_(column),
