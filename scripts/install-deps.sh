@@ -2,7 +2,7 @@
 # Installs the Debian packages valvediag builds against. Only what is missing.
 set -euo pipefail
 pkgs=(cmake g++ make libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
-      libtomlplusplus-dev libmodbus-dev libsqlite3-dev)
+      libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox)
 [ "${VALVEDIAG_FUZZ_DEPS:-0}" = 1 ] && pkgs+=(clang libclang-rt-dev)
 missing=()
 for p in "${pkgs[@]}"; do
