@@ -65,8 +65,4 @@ Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, d
 Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                         const ModelSpec& start, const DiagnoseOptions& opt = {});
 
-// The verdict a plant engineer wants first, from a diagnosis: "stiction", "deadband",
-// "other-nonlinearity", "no-valve-problem".
-std::string verdict(const Diagnosis& d);
-
 }  // namespace valvediag

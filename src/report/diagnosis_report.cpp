@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include "valvediag/verdict.hpp"
+
 namespace valvediag {
 
 namespace {

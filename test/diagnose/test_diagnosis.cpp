@@ -7,6 +7,7 @@
 #include <string>
 
 #include "valvediag/diagnosis.hpp"
+#include "valvediag/verdict.hpp"
 #include "valvediag/scenarios.hpp"
 
 using namespace valvediag;
