@@ -7,8 +7,8 @@
 #include <string>
 
 #include "valvediag/diagnosis.hpp"
-#include "valvediag/verdict.hpp"
 #include "valvediag/scenarios.hpp"
+#include "valvediag/verdict.hpp"
 
 using namespace valvediag;
 
