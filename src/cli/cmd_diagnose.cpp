@@ -20,7 +20,8 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       "  valvediag diagnose loop.csv                        (start from the linear model)\n"
       "  valvediag diagnose loop.csv --model stiction --json diag.json\n"
       "  valvediag diagnose loop.csv --auto                 (climb the ladder; see valvediag "
-      "ladder loop.csv)");
+      "ladder loop.csv)\n"
+      "  valvediag diagnose --db site.sqlite --loop FIC101 --auto   (a recorded loop)");
   struct Args {
     DataOptions data;
     std::string model = "linear";
@@ -72,9 +73,10 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       std::vector<HistoryEntry> entries;
       for (const auto& s : r.steps)
         entries.push_back(history_entry(s.fit, a->autoclimb ? "diagnose --auto" : "diagnose"));
-      const std::string path = history_path_for(a->data.data);
+      const std::string path = history_path_for(data_name(a->data));
       append_history(path, entries);
-      std::cout << "model history: " << path << " (valvediag ladder " << a->data.data << ")\n";
+      std::cout << "model history: " << path << " (valvediag ladder " << data_name(a->data)
+                << ")\n";
     }
     exit_code = kOk;
   });
@@ -83,16 +85,28 @@ void add_diagnose(CLI::App& app, int& exit_code) {
 void add_ladder(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
       "ladder", "Print the model ladder of a data file: each fit, its fitness, the change");
-  cmd->footer("Example:\n  valvediag diagnose loop.csv --auto && valvediag ladder loop.csv");
-  auto data = std::make_shared<std::string>();
-  cmd->add_option("data", *data, "the data file whose history to show")->required();
-  cmd->callback([data, &exit_code] {
-    const std::string path = history_path_for(*data);
+  cmd->footer(
+      "Examples:\n  valvediag diagnose loop.csv --auto && valvediag ladder loop.csv\n"
+      "  valvediag ladder --db site.sqlite --loop FIC101");
+  struct Args {
+    std::string data, db, loop;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("data", a->data, "the data file whose history to show");
+  cmd->add_option("--db", a->db, "a recording: show the history of --loop in it");
+  cmd->add_option("--loop", a->loop, "the recorded loop (with --db)");
+  cmd->callback([a, &exit_code] {
+    if (a->data.empty() == a->db.empty())
+      throw UsageError("give a data file or --db site.sqlite --loop NAME (one of them)");
+    if (!a->db.empty() && a->loop.empty()) throw UsageError("--db needs --loop NAME");
+    const std::string name = a->db.empty() ? a->data : a->db + "." + a->loop;
+    const std::string path = history_path_for(name);
     const auto entries = load_history(path);
+    const std::string source = a->db.empty() ? a->data : "--db " + a->db + " --loop " + a->loop;
     if (entries.empty())
-      throw UsageError("no model history for " + *data + " (" + path +
-                       "): run 'valvediag diagnose " + *data + " --auto' or 'valvediag fit " +
-                       *data + " --model SPEC' first");
+      throw UsageError("no model history for " + name + " (" + path +
+                       "): run 'valvediag diagnose " + source + " --auto' or 'valvediag fit " +
+                       source + " --model SPEC' first");
     std::cout << format_ladder(entries);
     exit_code = kOk;
   });

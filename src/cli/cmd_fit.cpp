@@ -28,8 +28,7 @@ struct FitArgs {
   std::string select_on = "estimation";
   std::string json, series;
   bool no_merge = false;
-  std::string db, loop, from, to;  // a recorded loop instead of a CSV file
-  std::string model;               // a composable model instead of the Preisach identification
+  std::string model;  // a composable model instead of the Preisach identification
   std::vector<std::string> add, remove;
   bool no_history = false;
 };
@@ -146,13 +145,7 @@ void add_fit(CLI::App& app, int& exit_code) {
       "  valvediag fit loop.csv --method alternation --stop parameter --normalization paper-sign   "
       "(the paper)");
   auto a = std::make_shared<FitArgs>();
-  add_data_options(cmd, a->in, /*required=*/false);  // or --db below
-  auto* g_in = "Input";
-  cmd->add_option("--db", a->db, "a recording (valvediag record) instead of a CSV file")
-      ->group(g_in);
-  cmd->add_option("--loop", a->loop, "the recorded loop to fit (with --db)")->group(g_in);
-  cmd->add_option("--from", a->from, "with --db: start, s from the recording's start")->group(g_in);
-  cmd->add_option("--to", a->to, "with --db: end, s from the recording's start")->group(g_in);
+  add_data_options(cmd, a->in);
 
   auto* g_m = "Model";
   cmd->add_option("--na-max", a->fit.na_max, "largest A order")->group(g_m)->capture_default_str();
@@ -238,18 +231,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   cmd->callback([a, &exit_code] {
     std::vector<std::string> notes;
     if (a->output == "mv" && a->in.csv.mv_column.empty()) a->in.csv.mv_column = "mv";
-    if (a->in.data.empty() == a->db.empty())
-      throw UsageError("give a CSV file or --db site.sqlite --loop NAME (one of them)");
-    if (a->db.empty() && (!a->loop.empty() || !a->from.empty() || !a->to.empty()))
-      throw UsageError("--loop, --from and --to go with --db");
-    LoopData d;
-    if (a->db.empty()) {
-      d = load_data(a->in, notes);
-    } else {
-      RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to);
-      notes = r.notes;
-      d = std::move(r.data);
-    }
+    LoopData d = load_data(a->in, notes);
     FitOptions& fo = a->fit;
     fo.method = a->method == "joint" ? FitMethod::Joint : FitMethod::Alternation;
     fo.stop_rule = a->stop == "cost" ? StopRule::CostDecrease : StopRule::ParameterChange;
@@ -264,12 +246,11 @@ void add_fit(CLI::App& app, int& exit_code) {
     if (fo.select_on_validation && a->validate.empty())
       throw UsageError("--select-on validation needs --validate (a fraction or a start time)");
     if (fo.block == LinearBlock::Identity && !d.has_mv())
-      throw UsageError((a->in.data.empty() ? a->db : a->in.data) +
+      throw UsageError(data_name(a->in) +
                        ": --output mv needs a valve position column (name it with --mv COLUMN)");
     if (auto msg = validate(fo); !msg.empty()) throw UsageError(msg);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
-    const std::string history =
-        history_path_for(a->in.data.empty() ? a->db + "." + a->loop : a->in.data);
+    const std::string history = history_path_for(data_name(a->in));
     if (!a->model.empty() || !a->add.empty() || !a->remove.empty()) {
       exit_code = fit_spec(d, *a, fo, history);
       return;

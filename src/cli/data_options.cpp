@@ -4,10 +4,14 @@
 
 namespace valvediag::cli {
 
-void add_data_options(CLI::App* cmd, DataOptions& d, bool required) {
+void add_data_options(CLI::App* cmd, DataOptions& d) {
   const char* g = "Input";
-  cmd->add_option("data", d.data, "CSV file with columns t, op, pv (optional sp, mv)")
-      ->required(required);
+  cmd->add_option("data", d.data,
+                  "CSV file with columns t, op, pv (optional sp, mv); or use --db and --loop");
+  cmd->add_option("--db", d.db, "a recording (valvediag record) instead of a CSV file")->group(g);
+  cmd->add_option("--loop", d.loop, "the recorded loop (with --db)")->group(g);
+  cmd->add_option("--from", d.from, "with --db: start, s from the recording's start")->group(g);
+  cmd->add_option("--to", d.to, "with --db: end, s from the recording's start")->group(g);
   cmd->add_option("--t", d.csv.t_column,
                   "time column name or 1-based index ('none': no time column)")
       ->group(g)
@@ -43,6 +47,15 @@ void add_data_options(CLI::App* cmd, DataOptions& d, bool required) {
 }
 
 LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
+  if (d.data.empty() == d.db.empty())
+    throw UsageError("give a CSV file or --db site.sqlite --loop NAME (one of them)");
+  if (!d.db.empty()) {
+    RecordedLoop r = read_db_loop(d.db, d.loop, d.from, d.to);
+    notes.insert(notes.end(), r.notes.begin(), r.notes.end());
+    return std::move(r.data);
+  }
+  if (!d.loop.empty() || !d.from.empty() || !d.to.empty())
+    throw UsageError("--loop, --from and --to go with --db");
   if (!d.sample_period.empty()) {
     try {
       d.csv.sample_period = std::stod(d.sample_period);
@@ -53,6 +66,10 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
   }
   d.csv.decimal = d.decimal[0];
   return read_loop_csv(d.data, d.csv, &notes);
+}
+
+std::string data_name(const DataOptions& d) {
+  return d.db.empty() ? d.data : d.db + "." + d.loop;
 }
 
 }  // namespace valvediag::cli

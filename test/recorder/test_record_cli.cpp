@@ -179,12 +179,21 @@ TEST_CASE("record exits 4 when errors happened, 0 when not; export and fit read 
              "6", "--L-max", "6"});
     CHECK(r.status == 0);
     CHECK(r.out.find("fitness:") != std::string::npos);
+    r = run({"diagnose", "--db", db, "--loop", "FIC101", "--candidates", "stiction,deadband"});
+    CHECK(r.status == 0);
+    CHECK(r.out.find("verdict:") != std::string::npos);
+    r = run({"ladder", "--db", db, "--loop", "FIC101"});  // the fit and the diagnosis above
+    CHECK(r.status == 0);
+    CHECK(r.out.find("linear") != std::string::npos);
   }
   r = run({"export", "--db", db, "--loop", "NOPE", "--out", csv.string()});
   CHECK(r.status == 2);
   CHECK(r.out.find("recorded loops: FIC101") != std::string::npos);
   r = run({"fit", "--db", db});
   CHECK(r.status == 2);
+  r = run({"diagnose", "--db", db, "--loop", "NOPE"});
+  CHECK(r.status == 2);
+  CHECK(r.out.find("recorded loops: FIC101") != std::string::npos);
 
   // Every request refused: exit status 4 and the exception count in the summary.
   FaultConfig f;
