@@ -1,22 +1,35 @@
 #include "data_options.hpp"
 
 #include "commands.hpp"
+#include "valvediag/mat_reader.hpp"
 
 namespace valvediag::cli {
 
 void add_data_options(CLI::App* cmd, DataOptions& d) {
   const char* g = "Input";
   cmd->add_option("data", d.data,
-                  "CSV file with columns t, op, pv (optional sp, mv); or use --db and --loop");
+                  "CSV file with columns t, op, pv (optional sp, mv), or a MATLAB .mat file "
+                  "(with --loop PATH when it holds several loops); or use --db and --loop");
   cmd->add_option("--db", d.db, "a recording (valvediag record) instead of a CSV file")->group(g);
-  cmd->add_option("--loop", d.loop, "the recorded loop (with --db)")->group(g);
+  cmd->add_option("--loop", d.loop,
+                  "the recorded loop (with --db), or the loop inside a .mat file: its path "
+                  "(benchmark.chemicals.loop23, runs(2)) or a matrix variable (m1d14); "
+                  "'valvediag import FILE.mat' lists them")
+      ->group(g);
   cmd->add_option("--from", d.from, "with --db: start, s from the recording's start")->group(g);
   cmd->add_option("--to", d.to, "with --db: end, s from the recording's start")->group(g);
+  add_layout_options(cmd, d);
+}
+
+void add_layout_options(CLI::App* cmd, DataOptions& d) {
+  const char* g = "Input";
   cmd->add_option("--t", d.csv.t_column,
                   "time column name or 1-based index ('none': no time column)")
       ->group(g)
       ->capture_default_str();
-  cmd->add_option("--op", d.csv.op_column, "controller output column")
+  cmd->add_option("--op", d.csv.op_column,
+                  "controller output column (.mat: field of the loop struct, or 1-based column "
+                  "of a matrix)")
       ->group(g)
       ->capture_default_str();
   cmd->add_option("--pv", d.csv.pv_column, "process variable column")
@@ -41,21 +54,25 @@ void add_data_options(CLI::App* cmd, DataOptions& d) {
       ->capture_default_str();
   cmd->add_flag("--resample", d.csv.resample, "interpolate irregular sampling onto a uniform grid")
       ->group(g);
-  cmd->add_option("--sample-period", d.sample_period,
-                  "sample period in s (with --resample or without a time column)")
+  cmd->add_option(
+         "--sample-period", d.sample_period,
+         "sample period in s (with --resample, without a time column, or for a .mat matrix or "
+         "loop without Ts)")
       ->group(g);
 }
 
 LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
   if (d.data.empty() == d.db.empty())
-    throw UsageError("give a CSV file or --db site.sqlite --loop NAME (one of them)");
+    throw UsageError("give a CSV or .mat file, or --db site.sqlite --loop NAME (one of them)");
   if (!d.db.empty()) {
     RecordedLoop r = read_db_loop(d.db, d.loop, d.from, d.to);
     notes.insert(notes.end(), r.notes.begin(), r.notes.end());
     return std::move(r.data);
   }
-  if (!d.loop.empty() || !d.from.empty() || !d.to.empty())
-    throw UsageError("--loop, --from and --to go with --db");
+  const bool mat = is_mat_file(d.data);
+  if ((!mat && !d.loop.empty()) || !d.from.empty() || !d.to.empty())
+    throw UsageError(mat ? "--from and --to go with --db"
+                         : "--loop goes with --db or a .mat file; --from and --to with --db");
   if (!d.sample_period.empty()) {
     try {
       d.csv.sample_period = std::stod(d.sample_period);
@@ -64,12 +81,30 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
                        "'");
     }
   }
+  if (mat) {
+    const CsvOptions plain;
+    const CsvOptions& c = d.csv;
+    if (c.delimiter != plain.delimiter || c.skip_lines || c.skip_after_header ||
+        c.time_format != plain.time_format || c.resample || d.decimal != ".")
+      throw UsageError(d.data +
+                       ": --delimiter, --skip-lines, --skip-after-header, --time-format, "
+                       "--resample and --decimal are for CSV files, not .mat");
+    MatOptions m;
+    m.op = c.op_column;
+    m.pv = c.pv_column;
+    m.sp = c.sp_column;
+    m.mv = c.mv_column;
+    m.t = c.t_column;
+    m.sample_period = c.sample_period;
+    return read_mat_loop(d.data, d.loop, m, &notes);
+  }
   d.csv.decimal = d.decimal[0];
   return read_loop_csv(d.data, d.csv, &notes);
 }
 
 std::string data_name(const DataOptions& d) {
-  return d.db.empty() ? d.data : d.db + "." + d.loop;
+  if (!d.db.empty()) return d.db + "." + d.loop;
+  return d.loop.empty() ? d.data : d.data + "." + d.loop;  // a loop inside a .mat file
 }
 
 }  // namespace valvediag::cli

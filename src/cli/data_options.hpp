@@ -1,6 +1,7 @@
 // The data options every analysis command takes: a CSV file with its layout (column remapping,
-// historian layout) or a recorded loop (--db/--loop/--from/--to), registered once here and
-// turned into LoopData.
+// historian layout), a loop inside a MATLAB .mat file (--loop PATH; --op/--pv name fields of a
+// loop struct or 1-based columns of a matrix) or a recorded loop (--db/--loop/--from/--to),
+// registered once here and turned into LoopData.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -14,21 +15,26 @@
 namespace valvediag::cli {
 
 struct DataOptions {
-  std::string data;  // a CSV file; empty when the loop comes from --db
+  std::string data;  // a CSV or .mat file; empty when the loop comes from --db
   CsvOptions csv;
   std::string sample_period;
   std::string decimal = ".";
-  std::string db, loop, from, to;  // a recorded loop (valvediag record) instead of a file
+  std::string db, loop, from, to;  // a recorded loop (valvediag record) instead of a file;
+                                   // loop also names the loop inside a .mat file
 };
 
 // Adds the positional DATA, --db/--loop/--from/--to and the CSV layout options (group "Input").
 void add_data_options(CLI::App* cmd, DataOptions& d);
+// Only the CSV layout options (columns, delimiter, header lines, time format, ...), for commands
+// that take several files (sweep).
+void add_layout_options(CLI::App* cmd, DataOptions& d);
 // Reads the data from the file or the recording; notes (columns used, time origin, resampling)
-// go to `notes`. Wrong combinations (both or neither source, --loop without --db) are
-// UsageErrors.
+// go to `notes`. Wrong combinations (both or neither source, --loop without --db or a .mat file,
+// CSV layout options with a .mat file) are UsageErrors.
 LoopData load_data(DataOptions& d, std::vector<std::string>& notes);
 // What the data is called in messages and which name its model history hangs off:
-// the file, or "site.sqlite.FIC101" for a recorded loop.
+// the file, "site.sqlite.FIC101" for a recorded loop, "runs.mat.runs(2)" for a loop of a .mat
+// file named with --loop.
 std::string data_name(const DataOptions& d);
 
 }  // namespace valvediag::cli
