@@ -68,6 +68,13 @@ class ArxEstimator {
   // the rule of LinearOptions::parsimony_percent picks among near-best structures.
   LinearFit fit(const std::vector<double>& x, bool parsimony = false) const;
   LinearFit fit(const std::vector<double>& x, const ArxStructure& s) const;
+  // As fit(x, true), with each structure's least-squares fit refined towards the output-error
+  // fit by Steiglitz-McBride iterations (output and valve position filtered by 1/A of the last
+  // iterate, A and B fitted again): least squares on the equation error is biased when the
+  // noise is coloured (load noise, closed loop), which hides extra lags and dead time. The
+  // iterate with the smallest simulated-output error is kept, so a refined structure never
+  // scores worse than its least-squares fit. Without drift terms only (with them: fit(x, true)).
+  LinearFit fit_output_error(const std::vector<double>& x, int iterations) const;
   // Simulated output over the whole record (samples before start() copied from y; the drift
   // held after end()).
   std::vector<double> simulate(const LinearFit& f, const std::vector<double>& x) const;
@@ -84,6 +91,8 @@ class ArxEstimator {
   Gram x_blocks(const std::vector<double>& x) const;
   LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x) const;
   double window_sse(const LinearFit& f, const std::vector<double>& x) const;
+  LinearFit pick(const std::vector<LinearFit>& fits) const;  // the parsimony rule
+  LinearFit refine(const LinearFit& ls, const std::vector<double>& x, int iterations) const;
 
   std::vector<double> y_, w_;  // output and regression target (w = y or its difference)
   LinearOptions opt_;
@@ -115,8 +124,11 @@ struct InputRange {
 //   characteristic auto: signed curvature k in [-ln 200, ln 200] (k > 0 equal-percentage with
 //     R = e^k, k < 0 quick-opening with R = e^-k, |k| < 1e-3 linear); a fixed kind: ln R in
 //     [1e-3, ln 200];
-//   actuator-lag: tau in [0, 60 Ts].
-// `preisach` and process effects have none (they are fitted otherwise). Throws for unknown names.
+//   actuator-lag: tau in [0, 60 Ts];
+//   order: an extra process lag in [0, 60 Ts] (a first-order block after the valve effects,
+//     besides the wider na, nb range).
+// `preisach` and the other process effects have none (they are fitted otherwise). Throws for
+// unknown names.
 std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputRange& r);
 // The block for coordinates theta (as many as search_parameters gives).
 ValveEffect make_valve_block(const EffectSpec& e, const double* theta, const InputRange& r);

@@ -11,6 +11,8 @@
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "valvediag/loop_data.hpp"
@@ -100,6 +102,28 @@ struct LoopSample {
   double t, sp, op, pv, mv;
 };
 
+// Where one effect of the simulated loop acted: the ground truth a diagnosis is checked against.
+//   valve blocks: stiction (every model), deadband, preisach: stuck, OP moving while the valve
+//     stays put; saturation: the block clamps; characteristic: the local slope of the map differs
+//     from its mean slope over the run by more than 20 %; actuator-lag: the valve lags OP by more
+//     than `move` (below);
+//   delay: the process still sees a valve position that differs by more than `move` from the
+//     current one (the dead time hides a move);
+//   order: within the extra lags' settling time (tau2 + tau3) after a valve move larger than
+//     `move` (a second-order process, or one with a third lag);
+//   integrator: the process input (valve position plus input load) is off the balance it started
+//     at by more than `move` (PV ramps);
+//   disturbance: the loads' effect on PV (output loads plus input loads through the process) is
+//     larger than twice the measurement noise (0.1 PV units when noise-free).
+struct EffectActivity {
+  std::string effect;  // effect name (effects.md): "stiction", "saturation", "delay", ...
+  std::string detail;  // what "acted" means for it, one line
+  std::vector<std::pair<std::size_t, std::size_t>> intervals;  // samples [begin, end), in order
+  std::size_t samples = 0;                                     // samples inside them
+  // True when [begin, end) overlaps an interval.
+  bool overlaps(std::size_t begin, std::size_t end) const;
+};
+
 class LoopSimulator {
  public:
   LoopSimulator(LoopConfig config, std::uint64_t seed);  // validates; starts at rest
@@ -108,6 +132,10 @@ class LoopSimulator {
   // The next `samples` samples as LoopData (sp and mv filled); `source` names the run.
   LoopData run(std::size_t samples, const std::string& source = "simulation");
   const LoopConfig& config() const { return config_; }
+  // Where each effect of the loop acted since the last reset (see EffectActivity), one entry per
+  // valve block (in chain order) and per process effect present (delay, order, integrator,
+  // disturbance). `move`: a valve move or lag worth noting, % (default 0.5).
+  std::vector<EffectActivity> activity(double move = 0.5) const;
 
  private:
   double setpoint_at(double t) const;
@@ -123,6 +151,14 @@ class LoopSimulator {
   std::normal_distribution<double> normal_{0.0, 1.0};
   std::vector<std::normal_distribution<double>> noise_normals_;
   std::size_t k_ = 0;
+  // What activity() needs, one entry per sample since the last reset.
+  struct Trace {
+    std::vector<std::vector<double>> block_in, block_out;  // per valve block
+    std::vector<double> x, process_in, load_pv;
+  };
+  Trace trace_;
+  DiscreteProcess load_process_;  // the process driven by the input loads only (from rest)
+  double x_rest_ = 0.0;
 };
 
 // Convenience: a fresh simulator run for `samples` samples.

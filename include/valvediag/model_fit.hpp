@@ -7,7 +7,8 @@
 // jointly with NLopt: a global stage (DIRECT-L, or a coarse grid evaluated in parallel) and a
 // Nelder-Mead polish from its best point, in boxes from the OP range.
 // `preisach` is fitted by the core's identify() on a restricted grid.
-// Process effects change the linear part: `delay` extends the nk range, `order` the na/nb range,
+// Process effects change the linear part: `delay` extends the nk range, `order` the na/nb range
+// and adds an extra first-order lag after the valve effects (searched like a valve parameter),
 // `integrator` fixes a (1 - q^-1) factor in A, `disturbance` adds a piecewise-linear slow load.
 #pragma once
 
@@ -43,7 +44,10 @@ struct ModelFitOptions {
   double local_xtol = 1e-4;   // relative to each coordinate's box width
   int preisach_L_min = 2, preisach_L_max = 16;
   std::size_t disturbance_knot_spacing = 0;  // samples; 0: LinearOptions' default
-  int threads = 0;                           // 0: all cores (Grid search, preisach, fit_models)
+  // Steiglitz-McBride iterations refining the final linear part towards the output-error fit
+  // (ArxEstimator::fit_output_error); 0: least squares only.
+  int output_error_iterations = 5;
+  int threads = 0;  // 0: all cores (Grid search, preisach, fit_models)
 };
 
 // How the solver ended. Impossible problems (bad data, bad options) throw instead.
@@ -70,7 +74,10 @@ struct ModelFit {
   bool integrating = false;  // A = (1 - q^-1) A'(q^-1): a, b, c belong to the differenced form
   std::vector<double> a, b;
   double c = 0.0;
-  std::vector<double> disturbance;  // estimated slow load d(t) (empty without `disturbance`)
+  // Estimated slow load d(t) (empty without `disturbance`). On the held-out part it is estimated
+  // again with the dynamics fixed (a load cannot be predicted: the held-out check is of the
+  // dynamics); simulate_model() holds the last estimated value instead.
+  std::vector<double> disturbance;
   double fitness_percent = std::numeric_limits<double>::quiet_NaN();  // estimation (eq 20)
   double validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();  // NaN: no split
   std::size_t first_sample = 0;    // t0: samples before it seed the simulation

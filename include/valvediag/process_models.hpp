@@ -11,7 +11,9 @@ namespace valvediag {
 
 enum class ProcessType {
   first_order,  // K e^{-theta s} / (tau s + 1)
-  // K e^{-theta s} / ((tau s + 1)(tau2 s + 1)), or K wn^2 e^{-theta s} / (s^2 + 2 zeta wn s + wn^2)
+  // K e^{-theta s} / ((tau s + 1)(tau2 s + 1)), or K wn^2 e^{-theta s} / (s^2 + 2 zeta wn s +
+  // wn^2); with tau3 > 0 a third lag (tau3 s + 1) in series (a process with more lags than the
+  // usual second-order ARX fit carries)
   second_order,
   integrating,  // K e^{-theta s} / s, or with a lag K e^{-theta s} / (s (tau s + 1)) when tau > 0
 };
@@ -26,6 +28,7 @@ struct ProcessSpec {
   double gain = 1.0;       // K; integrating: PV units per second per % of valve position
   double tau = 1.0;        // s; second order: first time constant; integrating: lag, 0 = none
   double tau2 = 0.0;       // s; second order: second time constant (used when wn == 0)
+  double tau3 = 0.0;       // s; second order, tau form: optional third lag, 0 = none
   double wn = 0.0;         // rad/s; second order: wn > 0 selects the wn/zeta form
   double zeta = 1.0;       // second order damping in the wn/zeta form
   double dead_time = 0.0;  // s, any value >= 0

@@ -29,6 +29,14 @@ Scenario scenario_by_name(const std::string& name);
 // "scenario <name>, seed <seed>".
 LoopData run_scenario(const Scenario& scenario, std::uint64_t seed, std::size_t samples);
 
+// A run with the simulator's record of where each effect acted (LoopSimulator::activity).
+struct ScenarioRun {
+  LoopData data;
+  std::vector<EffectActivity> activity;
+  const EffectActivity* find(const std::string& effect) const;  // nullptr when absent
+};
+ScenarioRun run_scenario_traced(const Scenario& scenario, std::uint64_t seed, std::size_t samples);
+
 // A problem in a scenario file: the message reads "<file>:<line>:<column>: <key>: <what is
 // wrong>; <what to do>", and the parts are available for tools.
 class ScenarioFileError : public std::runtime_error {

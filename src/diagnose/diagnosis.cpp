@@ -4,6 +4,9 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
+#include <optional>
+#include <stdexcept>
 
 namespace valvediag {
 
@@ -35,6 +38,17 @@ std::string explain(const std::string& effect, const ModelFit& trial,
   (void)Ts;
   if (effect == "stiction") {
     const double fs = param(p, "fs"), fd = param(p, "fd");
+    const double S = param(p, "S"), J = param(p, "J"), d = param(p, "d");
+    if (std::isfinite(S))
+      return fmt(
+          "valve sticks: OP must travel about %.1f %% after a reversal before it moves, then it "
+          "jumps about %.1f %% (Kano's model): add `stiction`",
+          S, std::isfinite(J) ? J : 0.0);
+    if (std::isfinite(d))
+      return fmt(
+          "valve sticks: it stays put until OP is about %.1f %% away, then jumps to it "
+          "(Stenman's model): add `stiction`",
+          d);
     if (std::isfinite(fs))
       return fmt(
           "valve sticks: OP must travel about %.1f %% after a reversal before it moves, then it "
@@ -108,6 +122,39 @@ double finite_or(double v, double fallback) {
   return std::isfinite(v) ? v : fallback;
 }
 
+// Free parameters an effect adds to the model (Occam's tie-break between findings).
+double effect_size(const std::string& effect, const ModelFit& t, double Ts) {
+  std::vector<NamedValue> p;
+  for (const auto& e : t.effects)
+    if (e.name == effect) p = e.parameters;
+  if (effect == "preisach") return std::max(1.0, param(p, "nonzero_weights", 1.0));
+  if (effect == "disturbance") {
+    const double h = param(p, "knot_spacing", 0.0) / Ts;
+    return h > 0 ? static_cast<double>(t.estimation_end - t.first_sample) / h + 1.0 : 10.0;
+  }
+  if (effect == "integrator") return 0.0;
+  if (effect == "order") return std::max(1.0, param(p, "na", 2) + param(p, "nb", 2) - 3.0);
+  if (effect == "stiction" || effect == "saturation")
+    return static_cast<double>(std::max<std::size_t>(1, p.size()));
+  return 1.0;  // deadband, characteristic, actuator-lag, delay
+}
+
+// Whether two trial fits predict the same output: the RMS difference of their simulated outputs
+// (over the samples both simulate) is below 0.7 of the smaller residual RMS: within what the
+// noise and the unmodelled loads leave, the data cannot prefer one.
+bool same_prediction(const std::vector<double>& y, const ModelFit& a, const ModelFit& b) {
+  if (a.y_sim.size() != y.size() || b.y_sim.size() != y.size()) return false;
+  const std::size_t from = std::max(a.first_sample, b.first_sample);
+  if (from >= y.size()) return false;
+  double d = 0, ra = 0, rb = 0;
+  for (std::size_t t = from; t < y.size(); ++t) {
+    d += (a.y_sim[t] - b.y_sim[t]) * (a.y_sim[t] - b.y_sim[t]);
+    ra += (y[t] - a.y_sim[t]) * (y[t] - a.y_sim[t]);
+    rb += (y[t] - b.y_sim[t]) * (y[t] - b.y_sim[t]);
+  }
+  return std::isfinite(d) && d < 0.5 * std::min(ra, rb);
+}
+
 DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                        const ModelSpec& model, const DiagnoseOptions& opt) {
   const ModelFitOptions fo = fit_options(opt);
@@ -132,7 +179,47 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       // Not combinable with this model (e.g. preisach beside another valve effect).
     }
   }
-  const auto fits = fit_models(u, y, Ts, trials, fo);
+  // Stiction is tried with He's model and with Kano's and Stenman's: friction models differ in
+  // when a stopped valve breaks away (He: a residual force; Kano: S against the last direction,
+  // J along it; Stenman: one band), and a model of the wrong kind can miss a stick-slip cycle
+  // on held-out data. The variant that fits the estimation data best stands for `stiction`.
+  const std::size_t n_main = trials.size();
+  std::vector<std::size_t> variant_of;  // index into the main trials
+  for (std::size_t i = 0; i < n_main; ++i) {
+    if (names[i] != "stiction" || !opt.candidates.empty()) continue;
+    const EffectSpec* st = trials[i].find("stiction");
+    if (!st || st->variant != "he") continue;
+    for (const char* v : {"stiction:kano", "stiction:stenman"}) {
+      trials.push_back(add_effect(trials[i], v));
+      variant_of.push_back(i);
+    }
+  }
+  auto fits = fit_models(u, y, Ts, trials, fo);
+  for (std::size_t j = 0; j < variant_of.size(); ++j) {
+    ModelFit& alt = fits[n_main + j];
+    const std::size_t i = variant_of[j];
+    if (finite_or(alt.fitness_percent, -1e9) > finite_or(fits[i].fitness_percent, -1e9)) {
+      fits[i] = std::move(alt);
+      trials[i] = trials[n_main + j];
+    }
+  }
+  fits.resize(n_main);
+  trials.resize(n_main);
+  // `preisach` is what a two-parameter stiction model cannot carry (effects.md): its residual
+  // evidence is the OP-level and direction dependence of the stiction trial's residual, not of
+  // the model's (a stick-slip cycle makes any memoryless model's error depend on OP level).
+  std::optional<ResidualAnalysis> after_stiction;
+  for (std::size_t i = 0; i < n_main; ++i)
+    if (names[i] == "stiction" && fits[i].y_sim.size() == y.size() &&
+        std::isfinite(fits[i].fitness_percent)) {
+      ResidualAnalysisOptions rs = ro;
+      rs.model_delay = static_cast<std::size_t>(std::max(0, fits[i].structure.nk + 1));
+      try {
+        after_stiction =
+            analyse_residual(u, y, fits[i].y_sim, fits[i].first_sample, fits[i].estimation_end, rs);
+      } catch (const std::invalid_argument&) {
+      }
+    }
   const double base_val = finite_or(step.fit.validation_fitness_percent, 0.0);
   const double base_est = finite_or(step.fit.fitness_percent, 0.0);
   for (std::size_t i = 0; i < fits.size(); ++i) {
@@ -146,11 +233,19 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     f.validation_gain_percent = finite_or(t.validation_fitness_percent, -1e9) - base_val;
     for (const auto& e : t.effects)
       if (e.name == f.effect) f.parameters = e.parameters;
-    for (const auto& test : step.residual.tests)
+    const bool on_stiction = f.effect == "preisach" && after_stiction.has_value();
+    const ResidualAnalysis& ra = on_stiction ? *after_stiction : step.residual;
+    // A residual that is mostly white noise cannot point far: the tests' scores count in
+    // proportion to the share of the residual variance above the white-noise level.
+    const double structured =
+        ra.rms > 0
+            ? std::clamp(1.0 - (ra.noise_level * ra.noise_level) / (ra.rms * ra.rms), 0.0, 1.0)
+            : 0.0;
+    for (const auto& test : ra.tests)
       if (std::find(test.effects.begin(), test.effects.end(), f.effect) != test.effects.end() &&
-          test.score > f.evidence) {
-        f.evidence = test.score;
-        f.evidence_test = test.name;
+          test.score * structured > f.evidence) {
+        f.evidence = test.score * structured;
+        f.evidence_test = on_stiction ? test.name + " (after stiction)" : test.name;
       }
     // A true missing effect improves both parts of the record: the smaller gain counts (a flexible
     // model that only wins on one part is fitting something else), relative to the error left.
@@ -169,19 +264,61 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     f.explanation = explain(f.effect, t, f.parameters);
     step.findings.push_back(std::move(f));
   }
+  // The stiction trial's leftover points to `preisach` only where preisach explains more than
+  // stiction does: otherwise the general hysteresis is not what the leftover needs.
+  {
+    Finding* st = nullptr;
+    Finding* pr = nullptr;
+    for (auto& f : step.findings) {
+      if (f.effect == "stiction") st = &f;
+      if (f.effect == "preisach") pr = &f;
+    }
+    if (st && pr && after_stiction && pr->gain_percent <= st->gain_percent) {
+      pr->evidence = 0.0;
+      pr->evidence_test.clear();
+      const double rel = pr->gain_percent / std::max(100.0 - base_est, 1.0);
+      pr->score = pr->gain_percent > 0 ? 0.6 * std::clamp(rel / 0.3, 0.0, 1.0) : 0.0;
+      pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent;
+    }
+  }
   // Scores saturate when the model leaves much to explain; among near-equal scores the larger
   // gain on both parts of the record ranks first.
+  // A trial that explains clearly more (by a fifth of the larger gain) ranks first whatever the
+  // residual tests say: they are hints, the trial fit is the measurement.
+  // Between comparable gains, an effect with several times fewer free parameters ranks first (a
+  // Preisach plane or a load curve can imitate a two-parameter valve, not the other way round);
+  // then the score (gain and residual evidence).
+  const double margin = opt.min_gain_percent;
+  std::map<std::string, double> size;
+  for (std::size_t i = 0; i < fits.size(); ++i) size[names[i]] = effect_size(names[i], fits[i], Ts);
   std::stable_sort(step.findings.begin(), step.findings.end(),
-                   [](const Finding& a, const Finding& b) {
+                   [margin, &size](const Finding& a, const Finding& b) {
+                     const double hi = std::max(a.gain_percent, b.gain_percent);
+                     if (hi >= margin && std::abs(a.gain_percent - b.gain_percent) > 0.2 * hi)
+                       return a.gain_percent > b.gain_percent;
+                     const double sa = size[a.effect], sb = size[b.effect];
+                     if (hi >= margin && (sa + 1) >= 3 * (sb + 1)) return false;
+                     if (hi >= margin && (sb + 1) >= 3 * (sa + 1)) return true;
                      if (std::abs(a.score - b.score) > 0.02) return a.score > b.score;
                      return a.gain_percent > b.gain_percent;
                    });
-  // Two effects that the data cannot tell apart: say so rather than pretend.
+  // Two effects that the data cannot tell apart: say so rather than pretend. They are when their
+  // trial models predict the same output (the two simulated outputs differ by much less than
+  // either leaves unexplained) and gain about as much.
   if (step.findings.size() >= 2) {
     auto& a = step.findings[0];
     auto& b = step.findings[1];
-    if (a.gain_percent >= opt.min_gain_percent && b.gain_percent >= opt.min_gain_percent &&
-        std::abs(a.gain_percent - b.gain_percent) < 1.0) {
+    const ModelFit* fa = nullptr;
+    const ModelFit* fb = nullptr;
+    for (std::size_t i = 0; i < fits.size(); ++i) {
+      if (names[i] == a.effect) fa = &fits[i];
+      if (names[i] == b.effect) fb = &fits[i];
+    }
+    if (fa && fb && a.gain_percent >= opt.min_gain_percent &&
+        b.gain_percent >= opt.min_gain_percent &&
+        std::abs(a.gain_percent - b.gain_percent) <=
+            std::max(1.0, 0.25 * std::max(a.gain_percent, b.gain_percent)) &&
+        same_prediction(y, *fa, *fb)) {
       a.indistinguishable_from = b.effect;
       b.indistinguishable_from = a.effect;
     }

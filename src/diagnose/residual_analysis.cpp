@@ -420,7 +420,7 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     const double hh = h;
     const double crit =
         hh * std::pow(1 - 2 / (9 * hh) + 1.645 * std::sqrt(2 / (9 * hh)), 3);  // chi2 95 %
-    push("whiteness", {"disturbance", "order"}, q / crit, (q / crit - 1) / 20,
+    push("whiteness", {"disturbance"}, q / crit, (q / crit - 1) / 20,
          fmt("Ljung-Box Q = %.0f over %.0f lags (white below %.0f)", q, hh, crit));
   }
   return a;

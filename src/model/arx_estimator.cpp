@@ -183,14 +183,106 @@ LinearFit ArxEstimator::fit(const std::vector<double>& x, bool parsimony) const 
         if (parsimony) fits.push_back(std::move(f));
       }
   if (!parsimony || !best.ok || opt_.parsimony_percent <= 0) return best;
+  return pick(fits);
+}
+
+LinearFit ArxEstimator::pick(const std::vector<LinearFit>& fits) const {
+  const LinearFit* best = nullptr;
+  for (const auto& f : fits)
+    if (f.ok && (!best || f.sse < best->sse)) best = &f;
+  if (!best) return {};
+  if (opt_.parsimony_percent <= 0) return *best;
   auto key = [](const LinearFit& f) {
     return std::make_tuple(f.structure.na + f.structure.nb, f.structure.nk, f.structure.na);
   };
-  const LinearFit* pick = &best;
+  const LinearFit* p = best;
   for (const auto& f : fits)
-    if (f.fitness_percent >= best.fitness_percent - opt_.parsimony_percent && key(f) < key(*pick))
-      pick = &f;
-  return *pick;
+    if (f.ok && f.fitness_percent >= best->fitness_percent - opt_.parsimony_percent &&
+        key(f) < key(*p))
+      p = &f;
+  return *p;
+}
+
+LinearFit ArxEstimator::refine(const LinearFit& ls, const std::vector<double>& x,
+                               int iterations) const {
+  LinearFit best = ls;
+  if (!ls.ok || opt_.drift) return best;
+  const std::size_t N = end_;
+  const int na = ls.structure.na, nb = ls.structure.nb, nk = ls.structure.nk;
+  const int p = na + nb + 1;
+  const auto n = static_cast<Eigen::Index>(end_ - t0_);
+  std::vector<double> a = ls.a;
+  std::vector<double> wf(N), xf(N);
+  for (int it = 0; it < iterations; ++it) {
+    // 1/A filter from the steady state of the first samples.
+    double a1 = 1.0;
+    for (double v : a) a1 += v;
+    if (!(std::abs(a1) > 1e-9)) break;
+    const std::size_t na_s = a.size();
+    for (std::size_t t = 0; t < N; ++t) {
+      if (t < na_s) {
+        wf[t] = w_[0] / a1;
+        xf[t] = x[0] / a1;
+        continue;
+      }
+      double sw = w_[t], sx = x[t];
+      for (std::size_t i = 1; i <= na_s; ++i) {
+        sw -= a[i - 1] * wf[t - i];
+        sx -= a[i - 1] * xf[t - i];
+      }
+      wf[t] = sw;
+      xf[t] = sx;
+    }
+    // Normal equations accumulated row by row (no n x p matrix).
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(p, p);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(p);
+    Eigen::VectorXd row(p);
+    for (Eigen::Index r = 0; r < n; ++r) {
+      const std::size_t t = t0_ + static_cast<std::size_t>(r);
+      for (int i = 1; i <= na; ++i) row[i - 1] = wf[t - static_cast<std::size_t>(i)];
+      for (int k = 1; k <= nb; ++k) row[na + k - 1] = xf[t - static_cast<std::size_t>(nk + k)];
+      row[p - 1] = 1.0;
+      M.selfadjointView<Eigen::Lower>().rankUpdate(row);
+      rhs += wf[t] * row;
+    }
+    M = M.selfadjointView<Eigen::Lower>();
+    M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
+    const Eigen::VectorXd th = M.ldlt().solve(rhs);
+    if (!th.allFinite()) break;
+    LinearFit f;
+    f.structure = ls.structure;
+    f.a.resize(static_cast<std::size_t>(na));
+    f.b.resize(static_cast<std::size_t>(nb));
+    for (int i = 0; i < na; ++i) f.a[static_cast<std::size_t>(i)] = -th[i];
+    for (int k = 0; k < nb; ++k) f.b[static_cast<std::size_t>(k)] = th[na + k];
+    // The constant of the filtered equation is c / A_prev(1); the model's is c.
+    f.c = th[p - 1] * a1;
+    if (!stable(f.a)) break;
+    const double sse = window_sse(f, x);
+    if (!std::isfinite(sse)) break;
+    f.sse = sse;
+    f.fitness_percent = den_ > 0 ? (1.0 - std::sqrt(sse / den_)) * 100.0 : kNaN;
+    f.ok = true;
+    const bool converged = f.sse > best.sse * (1.0 - 1e-3);
+    if (f.sse < best.sse) best = f;
+    if (converged) break;  // no longer improving by 0.1 %
+    a = f.a;
+  }
+  return best;
+}
+
+LinearFit ArxEstimator::fit_output_error(const std::vector<double>& x, int iterations) const {
+  if (opt_.drift || iterations <= 0) return fit(x, true);
+  const Gram g = x_blocks(x);
+  const auto& r = opt_.range;
+  std::vector<LinearFit> fits;
+  for (int nk = r.nk_min; nk <= r.nk_max; ++nk)
+    for (int na = r.na_min; na <= r.na_max; ++na)
+      for (int nb = r.nb_min; nb <= r.nb_max; ++nb) {
+        const LinearFit f = solve(g, ArxStructure{na, nb, nk}, x);
+        if (f.ok) fits.push_back(refine(f, x, iterations));
+      }
+  return pick(fits);
 }
 
 std::vector<double> ArxEstimator::drift_series(const LinearFit& f) const {

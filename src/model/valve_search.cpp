@@ -37,6 +37,10 @@ std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputR
     return {{"ln R", "", kLinearCurvature, kLnRMax}};
   }
   if (e.name == "actuator-lag") return {{"tau", "s", 0.0, 60.0 * r.Ts}};
+  // `order`: an extra first-order lag between the valve and the process, searched like the
+  // actuator's (a chain of lags is what more ARX orders stand for; least squares alone fits
+  // high orders poorly under coloured noise).
+  if (e.name == "order") return {{"lag", "s", 0.0, 60.0 * r.Ts}};
   if (find_effect(e.name)) return {};
   throw std::invalid_argument("unknown effect '" + e.name + "'");
 }
@@ -66,7 +70,7 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
     if (fixed) kind = characteristic_kind_from_string(e.variant);
     return Characteristic(kind, std::exp(std::max(std::abs(k), kLinearCurvature)));
   }
-  if (e.name == "actuator-lag") return ActuatorLag(std::max(th[0], 0.0), r.Ts);
+  if (e.name == "actuator-lag" || e.name == "order") return ActuatorLag(std::max(th[0], 0.0), r.Ts);
   throw std::invalid_argument("effect '" + e.name + "' has no valve block to search");
 }
 

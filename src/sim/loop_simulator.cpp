@@ -116,7 +116,8 @@ LoopSimulator::LoopSimulator(LoopConfig config, std::uint64_t seed)
     : config_((validate(config), std::move(config))),
       pi_(config_.controller, config_.Ts),
       valve_(config_.valve),
-      process_(config_.process, config_.Ts) {
+      process_(config_.process, config_.Ts),
+      load_process_(config_.process, config_.Ts) {
   reset(seed);
 }
 
@@ -126,6 +127,11 @@ void LoopSimulator::reset(std::uint64_t seed) {
   pi_.reset(config_.controller.op0);
   const double x_rest = valve_.reset(config_.controller.op0);
   process_.reset(x_rest);
+  load_process_.reset(0.0);
+  x_rest_ = x_rest;
+  trace_ = Trace{};
+  trace_.block_in.assign(config_.valve.size(), {});
+  trace_.block_out.assign(config_.valve.size(), {});
 
   measurement_engine_ = make_engine(seed, kMeasurementStream);
   normal_.reset();
@@ -176,8 +182,17 @@ LoopSample LoopSimulator::step() {
   const double y = process_.output() + d_out;
   const double ym = y + config_.measurement_noise_std * normal_(measurement_engine_);
   const double u = pi_.step(sp, ym);
-  const double x = valve_.step(u);
+  double x = u;
+  for (std::size_t i = 0; i < valve_.effects().size(); ++i) {
+    trace_.block_in[i].push_back(x);
+    x = std::visit([x](auto& block) { return block.step(x); }, valve_.effects()[i]);
+    trace_.block_out[i].push_back(x);
+  }
+  trace_.load_pv.push_back(d_out + load_process_.output() - config_.process.pv0);
+  trace_.x.push_back(x);
+  trace_.process_in.push_back(x + d_in);
   process_.advance(x + d_in);
+  load_process_.advance(d_in);
 
   for (std::size_t i = 0; i < noise_state_.size(); ++i) {
     const auto& n = config_.disturbances.noises[i];
@@ -206,6 +221,111 @@ LoopData LoopSimulator::run(std::size_t samples, const std::string& source) {
     d.mv.push_back(s.mv);
   }
   return d;
+}
+
+bool EffectActivity::overlaps(std::size_t begin, std::size_t end) const {
+  for (const auto& [b, e] : intervals)
+    if (b < end && begin < e) return true;
+  return false;
+}
+
+namespace {
+
+// Flags -> intervals, gaps shorter than `gap` samples bridged.
+EffectActivity make_activity(std::string effect, std::string detail, const std::vector<char>& on,
+                             std::size_t gap = 5) {
+  EffectActivity a{std::move(effect), std::move(detail), {}, 0};
+  const std::size_t n = on.size();
+  for (std::size_t k = 0; k < n;) {
+    if (!on[k]) {
+      ++k;
+      continue;
+    }
+    std::size_t e = k;
+    while (e < n && on[e]) ++e;
+    if (!a.intervals.empty() && k - a.intervals.back().second < gap) {
+      a.intervals.back().second = e;
+    } else {
+      a.intervals.emplace_back(k, e);
+    }
+    k = e;
+  }
+  for (const auto& [b, e] : a.intervals) a.samples += e - b;
+  return a;
+}
+
+// Samples within `span` after a move of x larger than `move` (compared over `span` samples).
+std::vector<char> after_moves(const std::vector<double>& x, std::size_t span, double move) {
+  std::vector<char> on(x.size(), 0);
+  span = std::max<std::size_t>(span, 1);
+  for (std::size_t k = span; k < x.size(); ++k) on[k] = std::abs(x[k] - x[k - span]) > move;
+  return on;
+}
+
+}  // namespace
+
+std::vector<EffectActivity> LoopSimulator::activity(double move) const {
+  std::vector<EffectActivity> out;
+  const std::size_t n = trace_.x.size();
+  for (std::size_t i = 0; i < config_.valve.size(); ++i) {
+    const auto& in = trace_.block_in[i];
+    const auto& o = trace_.block_out[i];
+    const ValveEffect& block = config_.valve[i];
+    const std::string name = effect_name(block);
+    std::vector<char> on(n, 0);
+    std::string detail;
+    if (name == "saturation") {
+      detail = "the travel limits clamp the valve";
+      for (std::size_t k = 0; k < n; ++k) on[k] = std::abs(o[k] - in[k]) > 1e-9;
+    } else if (name == "characteristic") {
+      detail = "the map's local slope differs from its mean slope by more than 20 %";
+      ValveEffect probe = block;
+      auto map = [&probe](double v) {
+        return std::visit([v](auto& b) { return b.step(v); }, probe);
+      };
+      std::vector<double> slope(n);
+      double mean = 0.0;
+      for (std::size_t k = 0; k < n; ++k) {
+        slope[k] = map(in[k] + 0.5) - map(in[k] - 0.5);
+        mean += slope[k] / static_cast<double>(n);
+      }
+      for (std::size_t k = 0; k < n; ++k) on[k] = std::abs(slope[k] - mean) > 0.2 * mean;
+    } else if (name == "actuator-lag") {
+      detail = "the valve lags OP by more than the move threshold";
+      for (std::size_t k = 0; k < n; ++k) on[k] = std::abs(o[k] - in[k]) > move;
+    } else {
+      detail = "stuck: OP moves while the valve stays put";
+      for (std::size_t k = 1; k < n; ++k)
+        on[k] = std::abs(in[k] - in[k - 1]) > 1e-9 && std::abs(o[k] - o[k - 1]) <= 1e-9;
+    }
+    out.push_back(make_activity(name, detail, on));
+  }
+  const ProcessSpec& p = config_.process;
+  const std::size_t delay = static_cast<std::size_t>(std::llround(p.dead_time / config_.Ts));
+  if (delay > 0)
+    out.push_back(make_activity("delay", "the dead time hides a valve move from the process",
+                                after_moves(trace_.x, delay, move)));
+  if (p.type == ProcessType::second_order) {
+    const double extra = p.wn > 0.0 ? 2.0 / p.wn : p.tau2 + p.tau3;
+    out.push_back(make_activity(
+        "order", "settling of the extra lags after a valve move",
+        after_moves(trace_.x, static_cast<std::size_t>(std::llround(extra / config_.Ts)), move)));
+  }
+  if (p.type == ProcessType::integrating) {
+    std::vector<char> on(n, 0);
+    for (std::size_t k = 0; k < n; ++k) on[k] = std::abs(trace_.process_in[k] - x_rest_) > move;
+    out.push_back(make_activity("integrator", "the inflow is off its balance: PV ramps", on));
+  }
+  const auto& d = config_.disturbances;
+  if (!d.steps.empty() || !d.drifts.empty() || !d.noises.empty()) {
+    const double level =
+        config_.measurement_noise_std > 0.0 ? 2.0 * config_.measurement_noise_std : 0.1;
+    std::vector<char> on(n, 0);
+    for (std::size_t k = 0; k < n; ++k) on[k] = std::abs(trace_.load_pv[k]) > level;
+    out.push_back(
+        make_activity("disturbance", "the loads move PV beyond the measurement noise", on));
+  }
+  return out;
 }
 
 LoopData simulate_loop(const LoopConfig& config, std::uint64_t seed, std::size_t samples) {

@@ -119,6 +119,7 @@ std::string describe(const ProcessSpec& s) {
         d += ", wn=" + num(s.wn) + " rad/s, zeta=" + num(s.zeta);
       } else {
         d += ", tau1=" + num(s.tau) + " s, tau2=" + num(s.tau2) + " s";
+        if (s.tau3 > 0.0) d += ", tau3=" + num(s.tau3) + " s";
       }
       break;
     case ProcessType::integrating:
@@ -164,13 +165,24 @@ DiscreteProcess::DiscreteProcess(const ProcessSpec& spec, double Ts) : spec_(spe
           throw std::invalid_argument(
               "process (second-order): needs tau > 0 and tau2 > 0 (or wn > 0 and zeta)");
         }
-        // Two lags in series: x1 after the first, y = x2 after the second.
-        A.resize(2, 2);
-        A << -1.0 / spec.tau, 0.0, 1.0 / spec.tau2, -1.0 / spec.tau2;
-        B.resize(2);
-        B << K / spec.tau, 0.0;
-        C_.resize(2);
-        C_ << 0.0, 1.0;
+        if (!std::isfinite(spec.tau3) || spec.tau3 < 0.0) {
+          throw std::invalid_argument("process (second-order): needs tau3 >= 0 (0: no third lag)");
+        }
+        // Lags in series: x1 after the first, x2 after the second, x3 after the optional third;
+        // y is the last.
+        const int n = spec.tau3 > 0.0 ? 3 : 2;
+        A = Eigen::MatrixXd::Zero(n, n);
+        A(0, 0) = -1.0 / spec.tau;
+        A(1, 0) = 1.0 / spec.tau2;
+        A(1, 1) = -1.0 / spec.tau2;
+        if (n == 3) {
+          A(2, 1) = 1.0 / spec.tau3;
+          A(2, 2) = -1.0 / spec.tau3;
+        }
+        B = Eigen::VectorXd::Zero(n);
+        B(0) = K / spec.tau;
+        C_ = Eigen::RowVectorXd::Zero(n);
+        C_(n - 1) = 1.0;
       }
       break;
     case ProcessType::integrating:

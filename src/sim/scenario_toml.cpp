@@ -223,10 +223,10 @@ ProcessSpec read_process(const Section& s, double Ts) {
       if (!(p.tau > 0.0)) s.fail("tau", "time constant must be > 0 s");
       break;
     case ProcessType::second_order:
-      s.allow_only({"type", "gain", "tau", "tau2", "wn", "zeta", "dead_time", "pv0"});
+      s.allow_only({"type", "gain", "tau", "tau2", "tau3", "wn", "zeta", "dead_time", "pv0"});
       if (s.has("wn")) {
-        if (s.has("tau") || s.has("tau2")) {
-          s.fail("wn", "give either wn and zeta or tau and tau2, not both");
+        if (s.has("tau") || s.has("tau2") || s.has("tau3")) {
+          s.fail("wn", "give either wn and zeta or tau and tau2 (and tau3), not both");
         }
         p.wn = s.number("wn");
         p.zeta = s.number("zeta");
@@ -238,6 +238,8 @@ ProcessSpec read_process(const Section& s, double Ts) {
         p.tau2 = s.number("tau2");
         if (!(p.tau > 0.0)) s.fail("tau", "time constant must be > 0 s");
         if (!(p.tau2 > 0.0)) s.fail("tau2", "time constant must be > 0 s");
+        p.tau3 = s.number("tau3", 0.0);
+        if (!(p.tau3 >= 0.0)) s.fail("tau3", "time constant must be >= 0 s (0: no third lag)");
       }
       break;
     case ProcessType::integrating:
@@ -524,6 +526,7 @@ std::string scenario_to_toml(const Scenario& sc) {
         o << "wn = " << num(p.wn) << "\nzeta = " << num(p.zeta) << "\n";
       } else {
         o << "tau = " << num(p.tau) << "\ntau2 = " << num(p.tau2) << "\n";
+        if (p.tau3 > 0.0) o << "tau3 = " << num(p.tau3) << "\n";
       }
       break;
     case ProcessType::integrating:

@@ -189,6 +189,81 @@ Scenario second_order() {
   return s;
 }
 
+// The process effects hidden from a `linear` start (whose base grid is na, nb <= 2, nk <= 10):
+// each a plain loop with a linear valve, filtered load noise and measurement noise, set-point
+// steps every few minutes (a step test), and one process feature that grid cannot carry.
+Scenario process_loop(const std::string& name, const std::string& description) {
+  Scenario s = base_loop(name, description);
+  s.loop.measurement_noise_std = 0.05;
+  s.loop.disturbances.noises = {{0.08, 60.0, DisturbanceEntry::output}};
+  s.loop.setpoint = {{0.0, 50.0},    {150.0, 55.0},  {400.0, 47.0},  {600.0, 52.0},  {850.0, 44.0},
+                     {1100.0, 50.0}, {1300.0, 56.0}, {1550.0, 49.0}, {1800.0, 53.0}, {2000.0, 46.0},
+                     {2250.0, 51.0}, {2500.0, 55.0}, {2750.0, 48.0}};
+  return s;
+}
+
+Scenario dead_time() {
+  Scenario s = process_loop(
+      "dead-time",
+      "dead-time dominant loop (transport line): first-order process (K 1.2, tau 4 s) with a 26 s "
+      "dead time and a PI tuned too tight for it (kc 0.3, ti 8 s): it rings after set-point steps");
+  s.loop.controller = {0.3, 8.0, 0.0, 100.0, 50.0};
+  s.loop.process = first_order_process(1.2, 4.0, 26.0, 50.0);
+  return s;
+}
+
+Scenario third_order() {
+  Scenario s =
+      process_loop("third-order",
+                   "three lags in series (K 1.2; 30, 20 and 16 s; theta 2 s), PI: more lags than a "
+                   "second-order model carries");
+  s.loop.controller = {0.9, 50.0, 0.0, 100.0, 50.0};
+  s.loop.process = second_order_process(1.2, 30.0, 20.0, 2.0, 50.0);
+  s.loop.process.tau3 = 16.0;
+  return s;
+}
+
+Scenario slow_actuator() {
+  Scenario s = process_loop(
+      "slow-actuator",
+      "slow actuator (tau 20 s) on a second-order process (K 1.2; 40 and 10 s; theta 2 s): the "
+      "actuator lag is a third lag the second-order fit cannot carry");
+  s.loop.controller = {0.9, 50.0, 0.0, 100.0, 50.0};
+  s.loop.process = second_order_process(1.2, 40.0, 10.0, 2.0, 50.0);
+  s.loop.valve = {ActuatorLag(20.0, s.loop.Ts)};
+  return s;
+}
+
+Scenario load_changes() {
+  Scenario s = base_loop(
+      "load-changes",
+      "unmeasured load changes: first-order loop with slow filtered load noise at the valve (std "
+      "4 %, tau 300 s), two load steps and a drift, linear valve");
+  s.loop.disturbances.noises = {{4.0, 300.0, DisturbanceEntry::input},
+                                {0.2, 60.0, DisturbanceEntry::output}};
+  s.loop.disturbances.steps = {{800.0, 6.0, DisturbanceEntry::input},
+                               {1900.0, -8.0, DisturbanceEntry::input}};
+  s.loop.disturbances.drifts = {{1200.0, 0.004, 1700.0, DisturbanceEntry::output}};
+  return s;
+}
+
+Scenario level() {
+  Scenario s;
+  s.name = "level";
+  s.description =
+      "surge-tank level loop K = 0.01 %/s per % valve, theta = 3 s, averaging PI (kc 0.8, ti "
+      "600 s) that lets the level swing; level waves and sensor noise on the measurement";
+  s.default_samples = 3000;
+  LoopConfig& c = s.loop;
+  c.Ts = 1.0;
+  c.controller = {0.8, 600.0, 0.0, 100.0, 50.0};
+  c.process = integrating_process(0.01, 3.0, 0.0, 50.0);
+  c.measurement_noise_std = 0.1;
+  c.disturbances.noises = {{0.3, 30.0, DisturbanceEntry::output}};
+  c.setpoint = {{0.0, 50.0}, {400.0, 60.0}, {1100.0, 45.0}, {1800.0, 55.0}, {2400.0, 48.0}};
+  return s;
+}
+
 const std::vector<std::pair<std::string, Builder>>& registry() {
   static const std::vector<std::pair<std::string, Builder>> r = {
       {"paper-ex1", paper_ex1},
@@ -205,6 +280,11 @@ const std::vector<std::pair<std::string, Builder>>& registry() {
       {"actuator-lag", actuator_lag},
       {"integrating", integrating},
       {"second-order", second_order},
+      {"dead-time", dead_time},
+      {"third-order", third_order},
+      {"slow-actuator", slow_actuator},
+      {"load-changes", load_changes},
+      {"level", level},
   };
   return r;
 }
@@ -230,6 +310,25 @@ LoopData run_scenario(const Scenario& scenario, std::uint64_t seed, std::size_t 
   if (samples == 0) samples = scenario.default_samples;
   LoopSimulator sim(scenario.loop, seed);
   return sim.run(samples, "scenario " + scenario.name + ", seed " + std::to_string(seed));
+}
+
+}  // namespace valvediag
+
+namespace valvediag {
+
+const EffectActivity* ScenarioRun::find(const std::string& effect) const {
+  for (const auto& a : activity)
+    if (a.effect == effect) return &a;
+  return nullptr;
+}
+
+ScenarioRun run_scenario_traced(const Scenario& scenario, std::uint64_t seed, std::size_t samples) {
+  if (samples == 0) samples = scenario.default_samples;
+  LoopSimulator sim(scenario.loop, seed);
+  ScenarioRun r;
+  r.data = sim.run(samples, "scenario " + scenario.name + ", seed " + std::to_string(seed));
+  r.activity = sim.activity();
+  return r;
 }
 
 }  // namespace valvediag
