@@ -32,6 +32,9 @@ void add_ladder(CLI::App& app, int& exit_code);
 void add_sim_plc(CLI::App& app, int& exit_code);
 void add_record(CLI::App& app, int& exit_code);
 void add_export(CLI::App& app, int& exit_code);
+void add_sweep(CLI::App& app, int& exit_code);
+void add_sweep_merge(CLI::App& app, int& exit_code);
+void add_trend(CLI::App& app, int& exit_code);
 
 // A loop read from a recording (--db/--loop of export and fit); --from/--to in seconds. Gaps and
 // unknown names are UsageErrors (exit status 2).

@@ -26,6 +26,9 @@ int main(int argc, char** argv) {
   add_sim_plc(app, code);
   add_record(app, code);
   add_export(app, code);
+  add_sweep(app, code);
+  add_sweep_merge(app, code);
+  add_trend(app, code);
   auto* help = app.add_subcommand("help", "List the commands, or explain one: valvediag help fit");
   std::string topic;
   help->add_option("command", topic, "command to explain");

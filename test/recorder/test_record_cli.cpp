@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "../bus/bus_test_util.hpp"
+#include "../common/run_cli.hpp"
 #include "valvediag/sim_plc.hpp"
 
 using namespace valvediag;
@@ -24,49 +25,11 @@ namespace {
 const std::string kSimSite = std::string(VALVEDIAG_CONFIG_DIR) + "/sim-site.toml";
 const fs::path kTmp = VALVEDIAG_TMP;
 
-pid_t spawn(const std::vector<std::string>& args, const fs::path& out) {
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(fd, 1);
-    ::dup2(fd, 2);
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(VALVEDIAG_BIN, argv.data());
-    ::_exit(127);
-  }
-  return pid;
-}
-
-// Exit status of the child, or -1 after killing it when it outlives `limit_s`.
-int wait_child(pid_t pid, double limit_s) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(limit_s);
-  int status = 0;
-  while (std::chrono::steady_clock::now() < end) {
-    if (::waitpid(pid, &status, WNOHANG) == pid)
-      return WIFEXITED(status) ? WEXITSTATUS(status) : -2;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  ::kill(pid, SIGKILL);
-  ::waitpid(pid, &status, 0);
-  return -1;
-}
-
-struct Result {
-  int status;
-  std::string out;
-};
+using test::spawn;
+using test::wait_child;
+using Result = test::CliResult;
 Result run(const std::vector<std::string>& args, double limit_s = 60.0) {
-  static int n = 0;
-  const fs::path out = kTmp / ("cli_out_" + std::to_string(++n) + ".txt");
-  std::vector<std::string> full{VALVEDIAG_BIN};
-  full.insert(full.end(), args.begin(), args.end());
-  const int st = wait_child(spawn(full, out), limit_s);
-  std::ifstream f(out);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return {st, ss.str()};
+  return test::run_cli(VALVEDIAG_BIN, args, kTmp, limit_s);
 }
 
 std::string fresh(const std::string& name) {

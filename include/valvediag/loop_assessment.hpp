@@ -1,0 +1,60 @@
+// One loop of a diagnostic sweep: is the record usable, how healthy is the loop, which model
+// explains it (diagnose --auto from `linear`), the verdict, the stiction size, and a severity to
+// rank loops by. No files, no bus: the sweep command feeds it LoopData.
+#pragma once
+
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "valvediag/diagnosis.hpp"
+#include "valvediag/loop_data.hpp"
+#include "valvediag/loop_health.hpp"
+
+namespace valvediag {
+
+struct AssessOptions {
+  OpRange range;             // the valve's OP span (site config), for % of travel
+  DiagnoseOptions diagnose;  // the --auto climb from `linear`
+  std::size_t min_samples = 200;
+};
+
+struct LadderStep {
+  std::string model;
+  double fitness_percent = 0.0, validation_fitness_percent = 0.0;
+};
+
+struct LoopAssessment {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  std::string loop;    // name (site config) or file stem
+  std::string source;  // file, or database and window
+  // stiction, deadband, other-nonlinearity, no-valve-problem, not-enough-data; "error" when the
+  // analysis itself failed (then `error` says why).
+  std::string verdict;
+  std::string reason;  // why the data is not enough, or what the verdict rests on
+  // Stiction band and slip jump in % of valve travel (OP range) when the model has them.
+  double stiction_percent = kNaN, slip_jump_percent = kNaN;
+  std::string model;  // best model (top of the climbed ladder)
+  double fitness_percent = kNaN, validation_fitness_percent = kNaN;
+  std::string first_missing;  // the effect the linear model misses first ("" when none)
+  std::vector<LadderStep> ladder;
+  LoopHealth health;
+  double severity = 0.0;  // ranking key, higher first (see assess_loop)
+  double elapsed_s = 0.0;
+  std::string error;  // the analysis failed: exception text, timeout, crash
+};
+
+// The whole assessment of one record. Throws only for programming errors; bad or short data
+// give verdict not-enough-data with the reason.
+LoopAssessment assess_loop(const LoopData& d, const std::string& name,
+                           const AssessOptions& opt = {});
+
+// Severity from verdict, stiction size and oscillation: stiction 6, deadband 5,
+// other-nonlinearity 3, no-valve-problem 1, not-enough-data 0, error -1; + 1 when the loop
+// oscillates; + the stiction band in % of travel / 2, at most 3.
+double severity(const LoopAssessment& a);
+
+// Highest severity first; ties by stiction size, then name.
+void rank(std::vector<LoopAssessment>& loops);
+
+}  // namespace valvediag

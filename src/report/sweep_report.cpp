@@ -1,0 +1,276 @@
+#include "valvediag/sweep_report.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+namespace valvediag {
+
+namespace {
+
+using nlohmann::json;
+
+json number(double v) {
+  return std::isfinite(v) ? json(v) : json(nullptr);
+}
+double number_of(const json& j, const char* key) {
+  if (!j.contains(key) || j[key].is_null()) return LoopAssessment::kNaN;
+  if (!j[key].is_number()) throw std::runtime_error(std::string("'") + key + "' must be a number");
+  return j[key].get<double>();
+}
+std::string text_of(const json& j, const char* key) {
+  if (!j.contains(key) || j[key].is_null()) return "";
+  if (!j[key].is_string()) throw std::runtime_error(std::string("'") + key + "' must be a string");
+  return j[key].get<std::string>();
+}
+
+std::string fmt(double v, int prec = 1) {
+  if (!std::isfinite(v)) return "-";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.*f", prec, v);
+  return b;
+}
+
+std::string html_escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '&':
+        o += "&amp;";
+        break;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      case '\'':
+        o += "&#39;";
+        break;
+      default:
+        o += c;
+    }
+  }
+  return o;
+}
+
+std::string csv_field(const std::string& s) {
+  if (s.find_first_of(",\"\n") == std::string::npos) return s;
+  std::string o = "\"";
+  for (char c : s) o += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return o + "\"";
+}
+
+}  // namespace
+
+json assessment_json(const LoopAssessment& a) {
+  json j;
+  j["loop"] = a.loop;
+  j["source"] = a.source;
+  j["verdict"] = a.verdict;
+  j["reason"] = a.reason;
+  j["severity"] = a.severity;
+  j["stiction_percent"] = number(a.stiction_percent);
+  j["slip_jump_percent"] = number(a.slip_jump_percent);
+  j["model"] = a.model;
+  j["fitness_percent"] = number(a.fitness_percent);
+  j["validation_fitness_percent"] = number(a.validation_fitness_percent);
+  j["first_missing"] = a.first_missing;
+  json ladder = json::array();
+  for (const auto& s : a.ladder)
+    ladder.push_back({{"model", s.model},
+                      {"fitness_percent", number(s.fitness_percent)},
+                      {"validation_fitness_percent", number(s.validation_fitness_percent)}});
+  j["ladder"] = ladder;
+  const LoopHealth& h = a.health;
+  j["health"] = {{"samples", h.samples},
+                 {"duration_s", h.duration_s},
+                 {"oscillating", h.oscillating},
+                 {"period_s", number(h.period_s)},
+                 {"regularity", number(h.regularity)},
+                 {"amplitude", number(h.amplitude)},
+                 {"signal", h.signal},
+                 {"op_reversals_per_hour", number(h.op_reversals_per_hour)},
+                 {"op_travel_percent_per_hour", number(h.op_travel_percent_per_hour)},
+                 {"time_at_limits_percent", number(h.time_at_limits_percent)},
+                 {"op_noise", number(h.op_noise)},
+                 {"op_span_percent", number(h.op_span_percent)}};
+  j["elapsed_s"] = a.elapsed_s;
+  j["error"] = a.error;
+  return j;
+}
+
+LoopAssessment assessment_from_json(const json& j) {
+  if (!j.is_object()) throw std::runtime_error("a loop's result must be a JSON object");
+  LoopAssessment a;
+  a.loop = text_of(j, "loop");
+  if (a.loop.empty()) throw std::runtime_error("a loop's result has no 'loop' name");
+  a.source = text_of(j, "source");
+  a.verdict = text_of(j, "verdict");
+  a.reason = text_of(j, "reason");
+  a.severity = number_of(j, "severity");
+  a.stiction_percent = number_of(j, "stiction_percent");
+  a.slip_jump_percent = number_of(j, "slip_jump_percent");
+  a.model = text_of(j, "model");
+  a.fitness_percent = number_of(j, "fitness_percent");
+  a.validation_fitness_percent = number_of(j, "validation_fitness_percent");
+  a.first_missing = text_of(j, "first_missing");
+  if (j.contains("ladder") && j["ladder"].is_array())
+    for (const auto& s : j["ladder"])
+      a.ladder.push_back({text_of(s, "model"), number_of(s, "fitness_percent"),
+                          number_of(s, "validation_fitness_percent")});
+  if (j.contains("health") && j["health"].is_object()) {
+    const json& h = j["health"];
+    LoopHealth& o = a.health;
+    o.samples = static_cast<std::size_t>(std::max(0.0, number_of(h, "samples")));
+    o.duration_s = number_of(h, "duration_s");
+    o.oscillating = h.value("oscillating", false);
+    o.period_s = number_of(h, "period_s");
+    o.regularity = number_of(h, "regularity");
+    o.amplitude = number_of(h, "amplitude");
+    o.signal = text_of(h, "signal");
+    o.op_reversals_per_hour = number_of(h, "op_reversals_per_hour");
+    o.op_travel_percent_per_hour = number_of(h, "op_travel_percent_per_hour");
+    o.time_at_limits_percent = number_of(h, "time_at_limits_percent");
+    o.op_noise = number_of(h, "op_noise");
+    o.op_span_percent = number_of(h, "op_span_percent");
+  }
+  a.elapsed_s = number_of(j, "elapsed_s");
+  a.error = text_of(j, "error");
+  return a;
+}
+
+json sweep_json(const SweepInfo& info, const std::vector<LoopAssessment>& loops) {
+  json j;
+  j["format"] = "valvediag-sweep-1";
+  j["started_utc"] = info.started_utc;
+  j["finished_utc"] = info.finished_utc;
+  j["source"] = info.source;
+  j["shard"] = info.shard;
+  j["window_s"] = info.window_s;
+  j["elapsed_s"] = info.elapsed_s;
+  json arr = json::array();
+  for (const auto& a : loops) arr.push_back(assessment_json(a));
+  j["loops"] = arr;
+  return j;
+}
+
+std::vector<LoopAssessment> sweep_loops_from_json(const json& j) {
+  if (!j.is_object() || j.value("format", "") != "valvediag-sweep-1" || !j.contains("loops") ||
+      !j["loops"].is_array())
+    throw std::runtime_error(
+        "not a valvediag sweep results file (expected \"format\": \"valvediag-sweep-1\" and a "
+        "\"loops\" array)");
+  std::vector<LoopAssessment> out;
+  for (std::size_t i = 0; i < j["loops"].size(); ++i) {
+    try {
+      out.push_back(assessment_from_json(j["loops"][i]));
+    } catch (const std::exception& e) {
+      throw std::runtime_error("loops[" + std::to_string(i) + "]: " + e.what());
+    }
+  }
+  return out;
+}
+
+std::string format_sweep_table(const std::vector<LoopAssessment>& loops) {
+  std::ostringstream o;
+  char line[512];
+  std::snprintf(line, sizeof line, "%-4s %-30s %-19s %8s %-24s %13s %-12s %9s %8s %8s %7s\n",
+                "rank", "loop", "verdict", "stiction", "model", "fit/val %", "missing first",
+                "period s", "rev/h", "travel/h", "limits");
+  o << line;
+  std::map<std::string, int> counts;
+  int rank = 0;
+  for (const auto& a : loops) {
+    ++counts[a.verdict];
+    const std::string fit = fmt(a.fitness_percent) + "/" + fmt(a.validation_fitness_percent);
+    std::snprintf(line, sizeof line, "%-4d %-30s %-19s %8s %-24s %13s %-12s %9s %8s %8s %7s\n",
+                  ++rank, a.loop.substr(0, 30).c_str(), a.verdict.c_str(),
+                  (fmt(a.stiction_percent, 2)).c_str(), a.model.substr(0, 24).c_str(), fit.c_str(),
+                  (a.first_missing.empty() ? "-" : a.first_missing).c_str(),
+                  a.health.oscillating ? fmt(a.health.period_s, 0).c_str() : "-",
+                  fmt(a.health.op_reversals_per_hour, 0).c_str(),
+                  fmt(a.health.op_travel_percent_per_hour, 0).c_str(),
+                  fmt(a.health.time_at_limits_percent, 0).c_str());
+    o << line;
+    if (a.verdict == "not-enough-data" || a.verdict == "error")
+      o << "     " << (a.error.empty() ? a.reason : a.error) << "\n";
+  }
+  o << "verdicts:";
+  for (const char* v : {"stiction", "deadband", "other-nonlinearity", "no-valve-problem",
+                        "not-enough-data", "error"})
+    if (counts.count(v)) o << " " << v << " " << counts[v];
+  o << " (" << loops.size() << " loops)\n";
+  o << "stiction: band in % of valve travel; period: of the oscillation, when one is found; "
+       "travel/h: OP path in % of range per hour; limits: % of time at an OP limit\n";
+  return o.str();
+}
+
+std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
+  std::ostringstream o;
+  o << "rank,loop,verdict,severity,stiction_percent,slip_jump_percent,model,fitness_percent,"
+       "validation_fitness_percent,first_missing,oscillating,period_s,op_reversals_per_hour,"
+       "op_travel_percent_per_hour,time_at_limits_percent,samples,source,reason,error\n";
+  int rank = 0;
+  auto n = [](double v) { return std::isfinite(v) ? fmt(v, 4) : std::string(); };
+  for (const auto& a : loops)
+    o << ++rank << "," << csv_field(a.loop) << "," << a.verdict << "," << n(a.severity) << ","
+      << n(a.stiction_percent) << "," << n(a.slip_jump_percent) << "," << csv_field(a.model) << ","
+      << n(a.fitness_percent) << "," << n(a.validation_fitness_percent) << "," << a.first_missing
+      << "," << (a.health.oscillating ? 1 : 0) << ","
+      << n(a.health.oscillating ? a.health.period_s : LoopAssessment::kNaN) << ","
+      << n(a.health.op_reversals_per_hour) << "," << n(a.health.op_travel_percent_per_hour) << ","
+      << n(a.health.time_at_limits_percent) << "," << a.health.samples << "," << csv_field(a.source)
+      << "," << csv_field(a.reason) << "," << csv_field(a.error) << "\n";
+  return o.str();
+}
+
+std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>& loops,
+                       const std::vector<std::string>& report_links) {
+  std::ostringstream o;
+  o << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+       "<title>valvediag sweep</title><style>"
+       "body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}"
+       "td,th{border:1px solid #bbb;padding:.25em .5em;text-align:right}"
+       "td.l,th.l{text-align:left}tr.stiction{background:#fdd}tr.deadband{background:#fed}"
+       "tr.other-nonlinearity{background:#ffe}tr.error,tr.not-enough-data{color:#777}"
+       "</style></head><body>\n";
+  o << "<h1>Valve diagnostic sweep</h1>\n<p>" << html_escape(info.source) << "; started "
+    << html_escape(info.started_utc) << ", finished " << html_escape(info.finished_utc);
+  if (!info.shard.empty()) o << "; shard " << html_escape(info.shard);
+  o << "; " << loops.size() << " loops, ranked by severity.</p>\n";
+  o << "<table><tr><th>rank</th><th class=\"l\">loop</th><th class=\"l\">verdict</th>"
+       "<th>stiction % travel</th><th>slip jump %</th><th class=\"l\">model</th><th>fitness "
+       "%</th><th>validation %</th><th class=\"l\">missing first</th><th>oscillation period "
+       "s</th><th>OP reversals/h</th><th>OP travel %/h</th><th>time at limits %</th>"
+       "<th class=\"l\">note</th></tr>\n";
+  for (std::size_t i = 0; i < loops.size(); ++i) {
+    const auto& a = loops[i];
+    const std::string link = i < report_links.size() ? report_links[i] : "";
+    o << "<tr class=\"" << html_escape(a.verdict) << "\"><td>" << i + 1 << "</td><td class=\"l\">";
+    if (!link.empty())
+      o << "<a href=\"" << html_escape(link) << "\">" << html_escape(a.loop) << "</a>";
+    else
+      o << html_escape(a.loop);
+    o << "</td><td class=\"l\">" << html_escape(a.verdict) << "</td><td>"
+      << fmt(a.stiction_percent, 2) << "</td><td>" << fmt(a.slip_jump_percent, 2) << "</td>"
+      << "<td class=\"l\">" << html_escape(a.model) << "</td><td>" << fmt(a.fitness_percent)
+      << "</td><td>" << fmt(a.validation_fitness_percent) << "</td><td class=\"l\">"
+      << html_escape(a.first_missing) << "</td><td>"
+      << (a.health.oscillating ? fmt(a.health.period_s, 0) : "-") << "</td><td>"
+      << fmt(a.health.op_reversals_per_hour, 0) << "</td><td>"
+      << fmt(a.health.op_travel_percent_per_hour, 0) << "</td><td>"
+      << fmt(a.health.time_at_limits_percent, 0) << "</td><td class=\"l\">"
+      << html_escape(a.error.empty() ? (a.verdict == "not-enough-data" ? a.reason : "") : a.error)
+      << "</td></tr>\n";
+  }
+  o << "</table>\n</body></html>\n";
+  return o.str();
+}
+
+}  // namespace valvediag

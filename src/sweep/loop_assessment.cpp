@@ -1,0 +1,122 @@
+#include "valvediag/loop_assessment.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "valvediag/verdict.hpp"
+
+namespace valvediag {
+
+namespace {
+
+double param(const std::vector<NamedValue>& p, const char* name) {
+  for (const auto& v : p)
+    if (v.name == name) return v.value;
+  return LoopAssessment::kNaN;
+}
+
+// The friction figures of the fitted valve, in OP units: He (fs, fd), Kano (S, J),
+// Stenman (d: band, jump d), deadband (d, no jump).
+void stiction_size(const ModelFit& fit, double width, LoopAssessment& a) {
+  for (const auto& e : fit.effects) {
+    double band = LoopAssessment::kNaN, jump = LoopAssessment::kNaN;
+    if (e.name == "stiction") {
+      if (!std::isnan(param(e.parameters, "fs"))) {
+        band = param(e.parameters, "fs");
+        jump = band - param(e.parameters, "fd");
+      } else if (!std::isnan(param(e.parameters, "S"))) {
+        band = param(e.parameters, "S");
+        jump = param(e.parameters, "J");
+      } else {
+        band = jump = param(e.parameters, "d");
+      }
+    } else if (e.name == "deadband" && std::isnan(a.stiction_percent)) {
+      band = param(e.parameters, "d");
+      jump = 0.0;
+    } else {
+      continue;
+    }
+    a.stiction_percent = 100.0 * band / width;
+    a.slip_jump_percent = 100.0 * jump / width;
+  }
+}
+
+}  // namespace
+
+double severity(const LoopAssessment& a) {
+  double s = 0.0;
+  if (a.verdict == "stiction")
+    s = 6;
+  else if (a.verdict == "deadband")
+    s = 5;
+  else if (a.verdict == "other-nonlinearity")
+    s = 3;
+  else if (a.verdict == "no-valve-problem")
+    s = 1;
+  else if (a.verdict == "not-enough-data")
+    return 0;
+  else
+    return -1;
+  if (a.health.oscillating) s += 1;
+  if (std::isfinite(a.stiction_percent)) s += std::clamp(a.stiction_percent / 2.0, 0.0, 3.0);
+  return s;
+}
+
+void rank(std::vector<LoopAssessment>& loops) {
+  auto size = [](const LoopAssessment& a) {
+    return std::isfinite(a.stiction_percent) ? a.stiction_percent : -1.0;
+  };
+  std::stable_sort(loops.begin(), loops.end(), [&](const auto& x, const auto& y) {
+    if (x.severity != y.severity) return x.severity > y.severity;
+    if (size(x) != size(y)) return size(x) > size(y);
+    return x.loop < y.loop;
+  });
+}
+
+LoopAssessment assess_loop(const LoopData& d, const std::string& name, const AssessOptions& opt) {
+  const auto t0 = std::chrono::steady_clock::now();
+  LoopAssessment a;
+  a.loop = name;
+  a.source = d.source;
+  a.health = loop_health(d, opt.range);
+  auto finish = [&] {
+    a.severity = severity(a);
+    a.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return a;
+  };
+  a.reason = unusable_reason(d, a.health, opt.min_samples);
+  if (!a.reason.empty()) {
+    a.verdict = "not-enough-data";
+    return finish();
+  }
+  Diagnosis dg;
+  try {
+    dg = diagnose_auto(d.op, d.pv, d.sample_period(), ModelSpec{}, opt.diagnose);
+  } catch (const std::invalid_argument& e) {
+    // The model library refuses data it cannot fit (too short after the split, ...).
+    a.verdict = "not-enough-data";
+    a.reason = e.what();
+    return finish();
+  }
+  const ModelFit& best = dg.last().fit;
+  a.verdict = verdict(dg);
+  a.model = to_string(best.spec);
+  a.fitness_percent = best.fitness_percent;
+  a.validation_fitness_percent = best.validation_fitness_percent;
+  for (const auto& s : dg.steps)
+    a.ladder.push_back(
+        {to_string(s.fit.spec), s.fit.fitness_percent, s.fit.validation_fitness_percent});
+  if (dg.steps.size() > 1) {
+    for (const auto& e : dg.steps[1].fit.spec.effects)  // the first effect the climb added
+      if (!dg.steps[0].fit.spec.has(e.name)) a.first_missing = e.name;
+  } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
+    a.first_missing = dg.steps.front().findings.front().effect;
+  }
+  stiction_size(best, std::max(opt.range.hi - opt.range.lo, 1e-12), a);
+  a.reason = dg.conclusion;
+  return finish();
+}
+
+}  // namespace valvediag

@@ -1,0 +1,71 @@
+// Runs the valvediag binary in a child process with a time limit, capturing stdout and stderr:
+// for tests of commands (exit statuses, messages, kill -9). A hung child is killed, never waited
+// for forever.
+#pragma once
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace valvediag::test {
+
+// Starts `args` (args[0]: the program) with stdout and stderr into `out`.
+inline pid_t spawn(const std::vector<std::string>& args, const std::filesystem::path& out) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, 1);
+    ::dup2(fd, 2);
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    ::execv(argv[0], argv.data());
+    ::_exit(127);
+  }
+  return pid;
+}
+
+// Exit status of the child, -2 when a signal ended it, or -1 after killing it when it outlives
+// `limit_s`.
+inline int wait_child(pid_t pid, double limit_s) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(limit_s);
+  int status = 0;
+  while (std::chrono::steady_clock::now() < end) {
+    if (::waitpid(pid, &status, WNOHANG) == pid)
+      return WIFEXITED(status) ? WEXITSTATUS(status) : -2;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, &status, 0);
+  return -1;
+}
+
+struct CliResult {
+  int status;
+  std::string out;
+};
+
+// `bin` with `args`; the output goes through a numbered file in `tmp`.
+inline CliResult run_cli(const std::string& bin, const std::vector<std::string>& args,
+                         const std::filesystem::path& tmp, double limit_s = 60.0) {
+  static int n = 0;
+  const std::filesystem::path out = tmp / ("cli_out_" + std::to_string(++n) + ".txt");
+  std::vector<std::string> full{bin};
+  full.insert(full.end(), args.begin(), args.end());
+  const int st = wait_child(spawn(full, out), limit_s);
+  std::ifstream f(out);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return {st, ss.str()};
+}
+
+}  // namespace valvediag::test

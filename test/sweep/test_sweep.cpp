@@ -1,0 +1,178 @@
+// One loop's assessment on simulated loops with a known answer, the results' JSON round trip,
+// ranking, the results store's trend, and the isolated job runner (time limit, crash, exception).
+#include <doctest/doctest.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <stdexcept>
+#include <thread>
+
+#include "../../src/cli/isolated_jobs.hpp"
+#include "valvediag/loop_assessment.hpp"
+#include "valvediag/scenarios.hpp"
+#include "valvediag/sweep_report.hpp"
+#include "valvediag/sweep_store.hpp"
+
+using namespace valvediag;
+namespace fs = std::filesystem;
+
+TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean one is not") {
+  const LoopData sticky = run_scenario(scenario_by_name("paper-ex1"), 1, 1500);
+  const LoopAssessment s = assess_loop(sticky, "FIC101");
+  INFO(s.reason);
+  CHECK(s.verdict == "stiction");
+  CHECK(s.error.empty());
+  REQUIRE(s.ladder.size() >= 2);
+  CHECK(s.ladder.front().model == "linear");
+  CHECK(!s.first_missing.empty());
+  CHECK(s.validation_fitness_percent > s.ladder.front().validation_fitness_percent + 2.0);
+  CHECK(s.severity >= 6.0);
+  CHECK(s.health.op_reversals_per_hour > 0);
+
+  const LoopData clean = run_scenario(scenario_by_name("linear-clean"), 1, 1500);
+  const LoopAssessment c = assess_loop(clean, "FIC102");
+  INFO(c.reason);
+  CHECK(c.verdict == "no-valve-problem");
+  CHECK(std::isnan(c.stiction_percent));
+  CHECK(c.severity < 3.0);
+
+  LoopData idle = clean;
+  for (auto& u : idle.op) u = 40.0;
+  const LoopAssessment i = assess_loop(idle, "FIC103");
+  CHECK(i.verdict == "not-enough-data");
+  CHECK(i.reason.find("OP does not move") == 0);
+  CHECK(i.severity == 0.0);
+}
+
+TEST_CASE("results survive their JSON round trip; rank puts the worst valve first") {
+  LoopAssessment a;
+  a.loop = "FIC101";
+  a.source = "site.sqlite (run 3)";
+  a.verdict = "stiction";
+  a.stiction_percent = 2.5;
+  a.slip_jump_percent = 1.0;
+  a.model = "stiction";
+  a.fitness_percent = 91.5;
+  a.validation_fitness_percent = 88.0;
+  a.first_missing = "stiction";
+  a.ladder = {{"linear", 60.0, 58.0}, {"stiction", 91.5, 88.0}};
+  a.health.oscillating = true;
+  a.health.period_s = 120;
+  a.health.op_reversals_per_hour = 60;
+  a.severity = severity(a);
+  const LoopAssessment b = assessment_from_json(nlohmann::json::parse(assessment_json(a).dump()));
+  CHECK(b.loop == a.loop);
+  CHECK(b.verdict == a.verdict);
+  CHECK(b.stiction_percent == 2.5);
+  CHECK(b.ladder.size() == 2);
+  CHECK(b.ladder[1].validation_fitness_percent == 88.0);
+  CHECK(b.health.oscillating);
+  CHECK(b.health.period_s == 120);
+  CHECK(b.severity == doctest::Approx(6 + 1 + 1.25));
+
+  LoopAssessment n;  // NaN figures travel as null and come back NaN
+  n.loop = "LIC201";
+  n.verdict = "no-valve-problem";
+  n.severity = severity(n);
+  const LoopAssessment m = assessment_from_json(assessment_json(n));
+  CHECK(std::isnan(m.stiction_percent));
+  CHECK(std::isnan(m.fitness_percent));
+  CHECK_THROWS_WITH_AS(assessment_from_json(nlohmann::json{{"verdict", "x"}}),
+                       "a loop's result has no 'loop' name", std::runtime_error);
+  CHECK_THROWS_AS(sweep_loops_from_json(nlohmann::json{{"loops", 3}}), std::runtime_error);
+
+  LoopAssessment e;
+  e.loop = "AIC9";
+  e.verdict = "error";
+  e.severity = severity(e);
+  LoopAssessment small = a;
+  small.loop = "FIC100";
+  small.stiction_percent = 0.5;
+  small.severity = severity(small);
+  std::vector<LoopAssessment> v{e, n, small, a};
+  rank(v);
+  CHECK(v[0].loop == "FIC101");
+  CHECK(v[1].loop == "FIC100");
+  CHECK(v[2].loop == "LIC201");
+  CHECK(v[3].loop == "AIC9");
+  const std::string table = format_sweep_table(v);
+  CHECK(table.find("verdicts: stiction 2 no-valve-problem 1 error 1 (4 loops)") !=
+        std::string::npos);
+  const std::string csv = sweep_csv(v);
+  CHECK(csv.find("1,FIC101,stiction,") != std::string::npos);
+  const std::string html = sweep_html(SweepInfo{}, v, {"reports/FIC101.html"});
+  CHECK(html.find("<a href=\"reports/FIC101.html\">FIC101</a>") != std::string::npos);
+}
+
+TEST_CASE("the results store keeps each sweep and gives a loop's trend, oldest first") {
+  const fs::path db =
+      fs::temp_directory_path() / ("valvediag-store-" + std::to_string(::getpid()) + ".sqlite");
+  fs::remove(db);
+  {
+    SweepStore store(db.string());
+    for (int k = 0; k < 3; ++k) {
+      SweepInfo info;
+      info.started_utc = "2026-11-2" + std::to_string(k) + "T02:00:00Z";
+      const auto id = store.begin_sweep(info);
+      LoopAssessment a;
+      a.loop = "FIC101";
+      a.verdict = k < 2 ? "no-valve-problem" : "stiction";
+      a.stiction_percent = k < 2 ? LoopAssessment::kNaN : 1.5 * k;
+      store.add_result(id, a);
+      store.end_sweep(id, info, "done");
+    }
+  }
+  SweepStore again(db.string());  // reopened: everything was committed
+  const auto t = again.trend("FIC101", 2);
+  REQUIRE(t.size() == 2);
+  CHECK(t[0].started_utc == "2026-11-21T02:00:00Z");
+  CHECK(t[1].result.verdict == "stiction");
+  CHECK(t[1].result.stiction_percent == 3.0);
+  CHECK(again.trend("NOPE").empty());
+  CHECK(again.assessed_loops() == std::vector<std::string>{"FIC101"});
+  CHECK(!recorded_end_s(db.string(), "FIC101"));  // no recording tables: an error, not a guess
+  fs::remove(db);
+}
+
+TEST_CASE("isolated jobs: results, exceptions, crashes and time limits stay with their job") {
+  using valvediag::cli::JobOutcome;
+  using valvediag::cli::run_isolated;
+  std::vector<JobOutcome> out(5);
+  std::vector<int> order;
+  const auto t0 = std::chrono::steady_clock::now();
+  run_isolated(
+      5, 2, 1.0,
+      [](std::size_t i) -> std::string {
+        if (i == 1) throw std::runtime_error("bad data in loop 1");
+        if (i == 2) std::abort();
+        if (i == 3) std::this_thread::sleep_for(std::chrono::seconds(30));
+        return "result " + std::to_string(i) + std::string(200000, 'x');  // beyond a pipe buffer
+      },
+      [&](std::size_t i, const JobOutcome& o) {
+        out[i] = o;
+        order.push_back(static_cast<int>(i));
+      });
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  CHECK(order.size() == 5);
+  CHECK(out[0].status == JobOutcome::Status::Ok);
+  CHECK(out[0].output.rfind("result 0", 0) == 0);
+  CHECK(out[0].output.size() == 8 + 200000);
+  CHECK(out[4].status == JobOutcome::Status::Ok);
+  CHECK(out[1].status == JobOutcome::Status::Failed);
+  CHECK(out[1].message == "bad data in loop 1");
+  CHECK(out[2].status == JobOutcome::Status::Crashed);
+  CHECK(out[2].message.find("signal 6") != std::string::npos);
+  CHECK(out[3].status == JobOutcome::Status::TimedOut);
+  CHECK(out[3].elapsed_s >= 1.0);
+  CHECK(wall < 20.0);  // the sleeping job was killed, not waited for
+
+  std::atomic<bool> stop{true};  // a stop before the start runs nothing
+  int ran = 0;
+  run_isolated(
+      3, 1, 5.0, [](std::size_t) { return std::string(); },
+      [&](std::size_t, const JobOutcome&) { ++ran; }, &stop);
+  CHECK(ran == 0);
+}

@@ -1,0 +1,168 @@
+// The sweep, sweep-merge and trend commands in their own processes: a site recorded from the
+// simulated PLC (reads only), data files with a bad one among them, shards merged back, a loop
+// stopped at its time limit, and user errors.
+#include <doctest/doctest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "../common/run_cli.hpp"
+#include "valvediag/sim_plc.hpp"
+#include "valvediag/site_config.hpp"
+
+using namespace valvediag;
+namespace fs = std::filesystem;
+
+namespace {
+const fs::path kTmp = VALVEDIAG_TMP;
+const std::string kSimSite = std::string(VALVEDIAG_CONFIG_DIR) + "/sim-site.toml";
+
+test::CliResult run(const std::vector<std::string>& args, double limit_s = 240.0) {
+  return test::run_cli(VALVEDIAG_BIN, args, kTmp, limit_s);
+}
+
+std::string fresh(const std::string& name) {
+  const fs::path p = kTmp / name;
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(p.string() + suffix);
+  return p.string();
+}
+
+nlohmann::json read_json(const std::string& path) {
+  std::ifstream f(path);
+  return nlohmann::json::parse(f);
+}
+
+const nlohmann::json* loop_in(const nlohmann::json& j, const std::string& name) {
+  for (const auto& l : j["loops"])
+    if (l["loop"] == name) return &l;
+  return nullptr;
+}
+}  // namespace
+
+TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend; nothing written") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{100.0, 0});
+  plc.start();
+  // FIC101 (paper Example 1, sticky) at 100x: 5 ms ticks; DEAD201 on a bus nobody serves.
+  const std::string site = (kTmp / "sweep-site.toml").string();
+  {
+    std::ofstream f(site);
+    f << "[[bus]]\nname = \"plc\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:"
+      << plc.port() << "\"\ntimeout = \"100ms\"\nretries = 0\nreconnect_max = \"500ms\"\n"
+      << "[[bus]]\nname = \"gone\"\nprotocol = \"modbus-tcp\"\ncontroller = "
+         "\"tcp://127.0.0.1:1\"\ntimeout = \"50ms\"\nretries = 0\nreconnect_max = \"500ms\"\n"
+      << "[[loop]]\nname = \"FIC101\"\nbus = \"plc\"\nsample_period = 0.005\n"
+      << "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
+      << "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\n"
+      << "sp = { register = \"holding\", address = 4, type = \"FLOAT32\" }\n"
+      << "[[loop]]\nname = \"DEAD201\"\nbus = \"gone\"\nsample_period = 0.1\n"
+      << "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
+      << "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\n";
+  }
+  const std::string db = fresh("sweep.sqlite");
+  const std::string json = (kTmp / "sweep.json").string(), csv = (kTmp / "sweep.csv").string(),
+                    html = (kTmp / "sweep.html").string();
+  auto r = run({"sweep", "--config", site, "--db", db, "--record", "8s", "--window", "1h", "--json",
+                json, "--csv", csv, "--html", html});
+  INFO(r.out);
+  CHECK(r.status == 0);  // findings and a dead loop are results
+  CHECK(plc.write_requests() == 0);
+  const auto j = read_json(json);
+  CHECK(j["format"] == "valvediag-sweep-1");
+  REQUIRE(j["loops"].size() == 2);
+  CHECK(j["loops"][0]["loop"] == "FIC101");  // ranked: the sticky valve first
+  CHECK(j["loops"][0]["verdict"] == "stiction");
+  CHECK(j["loops"][0]["ladder"].size() >= 2);
+  CHECK(j["loops"][1]["loop"] == "DEAD201");
+  CHECK(j["loops"][1]["verdict"] == "not-enough-data");
+  CHECK(r.out.find("verdicts: stiction 1 not-enough-data 1 (2 loops)") != std::string::npos);
+  std::ifstream c(csv);
+  std::string header;
+  std::getline(c, header);
+  CHECK(header.rfind("rank,loop,verdict,severity,stiction_percent", 0) == 0);
+  CHECK(fs::file_size(html) > 500);
+
+  // A second sweep over the same recording (no --record): the trend shows both.
+  r = run(
+      {"sweep", "--config", site, "--db", db, "--loops", "FIC101", "--window", "1h", "--quiet"});
+  CHECK(r.status == 0);
+  r = run({"trend", "--db", db, "--loop", "FIC101"});
+  CHECK(r.status == 0);
+  CHECK(r.out.find("FIC101:") == 0);
+  std::size_t rows = 0;
+  for (std::size_t p = r.out.find("stiction"); p != std::string::npos;
+       p = r.out.find("stiction", p + 1))
+    ++rows;
+  CHECK(rows >= 3);  // header column + two sweeps
+  CHECK(run({"sweep", "--config", site, "--db", db, "--loops", "NOPE"}).status == 2);
+}
+
+TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shards merge back") {
+  const std::string sticky = (kTmp / "sticky.csv").string(), clean = (kTmp / "clean.csv").string(),
+                    bad = (kTmp / "bad.csv").string(), tiny = (kTmp / "tiny.csv").string();
+  REQUIRE(run({"simulate", "--scenario", "paper-ex1", "--seed", "2", "--samples", "1500", "--out",
+               sticky})
+              .status == 0);
+  REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "2", "--samples", "1500",
+               "--out", clean})
+              .status == 0);
+  REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "3", "--samples", "120", "--out",
+               tiny})
+              .status == 0);
+  {
+    std::ofstream f(bad);
+    f << "t,op,pv\n0,1,2\n1,x,3\n";
+  }
+  const std::string all = (kTmp / "files.json").string();
+  auto r = run({"sweep", sticky, clean, bad, tiny, "--jobs", "2", "--json", all});
+  INFO(r.out);
+  CHECK(r.status == 0);
+  const auto j = read_json(all);
+  REQUIRE(j["loops"].size() == 4);
+  CHECK((*loop_in(j, "sticky"))["verdict"] == "stiction");
+  CHECK((*loop_in(j, "clean"))["verdict"] == "no-valve-problem");
+  CHECK((*loop_in(j, "bad"))["verdict"] == "error");
+  CHECK((*loop_in(j, "bad"))["error"].get<std::string>().find("bad.csv:3") != std::string::npos);
+  CHECK((*loop_in(j, "tiny"))["verdict"] == "not-enough-data");
+
+  // Two shards cover the list once; sweep-merge gives the same verdicts.
+  const std::string p0 = (kTmp / "part-0.json").string(), p1 = (kTmp / "part-1.json").string();
+  CHECK(
+      run({"sweep", sticky, clean, bad, tiny, "--shard", "0/2", "--json", p0, "--quiet"}).status ==
+      0);
+  CHECK(
+      run({"sweep", sticky, clean, bad, tiny, "--shard", "1/2", "--json", p1, "--quiet"}).status ==
+      0);
+  CHECK(read_json(p0)["loops"].size() + read_json(p1)["loops"].size() == 4);
+  const std::string merged = (kTmp / "merged.json").string();
+  r = run({"sweep-merge", p0, p1, "--json", merged});
+  CHECK(r.status == 0);
+  const auto m = read_json(merged);
+  REQUIRE(m["loops"].size() == 4);
+  for (const auto& l : j["loops"]) CHECK((*loop_in(m, l["loop"]))["verdict"] == l["verdict"]);
+  CHECK(m["loops"][0]["loop"] == "sticky");
+  r = run({"sweep-merge", p0, p0});
+  CHECK(r.status == 2);
+  CHECK(r.out.find("also in an earlier file") != std::string::npos);
+  CHECK(run({"sweep-merge", bad}).status == 2);
+}
+
+TEST_CASE("sweep: a loop over its time limit is stopped and reported; user errors exit 2") {
+  const std::string longf = (kTmp / "long.csv").string();
+  REQUIRE(
+      run({"simulate", "--scenario", "paper-ex1", "--samples", "6000", "--out", longf}).status ==
+      0);
+  const auto r =
+      run({"sweep", longf, "--loop-timeout", "0.3s", "--json", (kTmp / "t.json").string()}, 60);
+  INFO(r.out);
+  CHECK(r.status == 0);
+  CHECK(r.out.find("stopped at the time limit of 0 s") == std::string::npos);
+  CHECK(r.out.find("time limit") != std::string::npos);
+  CHECK(read_json((kTmp / "t.json").string())["loops"][0]["verdict"] == "error");
+
+  CHECK(run({"sweep"}).status == 2);
+  CHECK(run({"sweep", longf, "--config", kSimSite}).status == 2);
+  CHECK(run({"sweep", longf, "--shard", "2/2"}).status == 2);
+  CHECK(run({"sweep", longf, "--window", "soon"}).status == 2);
+  CHECK(run({"trend", "--db", (kTmp / "none.sqlite").string()}).status == 2);
+}
