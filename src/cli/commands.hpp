@@ -32,6 +32,7 @@ void add_ladder(CLI::App& app, int& exit_code);
 void add_sim_plc(CLI::App& app, int& exit_code);
 void add_record(CLI::App& app, int& exit_code);
 void add_export(CLI::App& app, int& exit_code);
+void add_import(CLI::App& app, int& exit_code);
 void add_sweep(CLI::App& app, int& exit_code);
 void add_sweep_merge(CLI::App& app, int& exit_code);
 void add_trend(CLI::App& app, int& exit_code);
