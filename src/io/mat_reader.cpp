@@ -667,7 +667,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
     d.mv = get(o.mv, "mv", false);
     const matvar_t* tsv = field(fs, "ts");
     std::optional<double> ts = sample_time(fs);
-    if (tsv != nullptr && !ts)
+    if (tsv != nullptr && element_count(tsv) > 0 && !ts)
       throw fail("field Ts must be one positive number of seconds, but is " + describe(tsv));
     if (ts && period && std::abs(*ts - *period) > 0.01 * *ts)
       throw fail("the sample period " + num(*period) + " s disagrees with Ts = " + num(*ts) +
