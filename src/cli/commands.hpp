@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "valvediag/html_report.hpp"
 #include "valvediag/recorder.hpp"
 
 namespace valvediag::cli {
@@ -33,6 +34,7 @@ void add_sim_plc(CLI::App& app, int& exit_code);
 void add_record(CLI::App& app, int& exit_code);
 void add_export(CLI::App& app, int& exit_code);
 void add_import(CLI::App& app, int& exit_code);
+void add_report(CLI::App& app, int& exit_code);
 void add_sweep(CLI::App& app, int& exit_code);
 void add_sweep_merge(CLI::App& app, int& exit_code);
 void add_trend(CLI::App& app, int& exit_code);
@@ -43,5 +45,17 @@ RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const 
                           const std::string& to, std::int64_t run = 0);
 // The recorder's end-of-run summary (record and demo).
 std::string recorder_summary(const RecorderStatus& s, const std::string& db, std::int64_t run);
+
+// The HTML report (report and demo): --out checked before the long work (a UsageError when the
+// file cannot be created), the page written atomically (a temporary file renamed over it).
+void check_report_writable(const std::string& path);
+struct ReportFile {
+  std::size_t bytes = 0, plots = 0;
+  double plot_seconds = 0.0;
+  std::vector<std::string> warnings;
+};
+ReportFile write_report_file(const std::string& path, const ReportContent& content,
+                             const ReportOptions& opt);
+std::string report_file_summary(const std::string& path, const ReportFile& r);
 
 }  // namespace valvediag::cli

@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   add_sim_plc(app, code);
   add_record(app, code);
   add_export(app, code);
+  add_report(app, code);
   add_sweep(app, code);
   add_sweep_merge(app, code);
   add_trend(app, code);

@@ -1,0 +1,203 @@
+// valvediag report: one self-contained HTML page about a loop and its model (html_report.hpp).
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+
+#include "commands.hpp"
+#include "data_options.hpp"
+#include "valvediag/data_checks.hpp"
+#include "valvediag/html_report.hpp"
+#include "valvediag/model_history.hpp"
+#include "valvediag/verdict.hpp"
+
+namespace valvediag::cli {
+
+void check_report_writable(const std::string& path) {
+  if (path.empty()) throw UsageError("--out: give the HTML file to write");
+  const std::string probe = path + ".partial";
+  {
+    std::ofstream f(probe, std::ios::binary);
+    if (!f)
+      throw UsageError("cannot write the report to " + path +
+                       ": check that the directory exists and is writable");
+  }
+  std::remove(probe.c_str());
+  if (std::filesystem::is_directory(path))
+    throw UsageError("--out " + path + " is a directory: give a file name, e.g. report.html");
+}
+
+ReportFile write_report_file(const std::string& path, const ReportContent& content,
+                             const ReportOptions& opt) {
+  const HtmlReport rep = html_report(content, opt);
+  const std::string partial = path + ".partial";
+  {
+    std::ofstream f(partial, std::ios::binary);
+    if (!f)
+      throw UsageError("cannot write the report to " + path +
+                       ": check that the directory exists and is writable");
+    f << rep.html;
+    f.close();
+    if (!f) {
+      std::remove(partial.c_str());
+      throw std::runtime_error("writing " + path + " failed (disk full?)");
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(partial, path, ec);
+  if (ec) {
+    std::remove(partial.c_str());
+    throw std::runtime_error("cannot write " + path + ": " + ec.message());
+  }
+  return {rep.html.size(), rep.plots.size(), rep.plot_seconds, rep.warnings};
+}
+
+std::string report_file_summary(const std::string& path, const ReportFile& r) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "wrote %s (%.0f KB, %zu plots drawn by gnuplot in %.2f s)\n",
+                path.c_str(), static_cast<double>(r.bytes) / 1024.0, r.plots, r.plot_seconds);
+  std::string s = buf;
+  for (const auto& w : r.warnings) s += "warning: " + w + "\n";
+  return s;
+}
+
+void add_report(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand(
+      "report", "Write one self-contained HTML report of a loop and its model, with plots");
+  cmd->footer(
+      "The page: data, model, fitness and verdict; OP/PV/SP trends; measured vs simulated PV with\n"
+      "the failing intervals shaded; residual; valve signature beside the Preisach triangle; Bode\n"
+      "and step response of the linear block; where the model fails; the diagnosis; the model\n"
+      "ladder. Plots are drawn by gnuplot (Debian package gnuplot-nox; VALVEDIAG_GNUPLOT names\n"
+      "another program) and embedded as SVG: the file has no scripts and no external links.\n"
+      "Examples:\n"
+      "  valvediag report loop.csv --out report.html          (model: the last of the ladder,\n"
+      "                                                        else preisach)\n"
+      "  valvediag report loop.csv --model stiction --out report.html\n"
+      "  valvediag report --db site.sqlite --loop FIC101 --out fic101.html\n"
+      "  valvediag report loop.csv --no-diagnose --no-plots --out quick.html");
+  struct Args {
+    DataOptions data;
+    std::string model, out, gnuplot;
+    double validate = 0.3;
+    double timeout = 30.0;
+    bool no_diagnose = false, no_history = false, no_plots = false;
+  };
+  auto a = std::make_shared<Args>();
+  add_data_options(cmd, a->data);
+  const char* g = "Report";
+  cmd->add_option("--model", a->model,
+                  "the model to fit and show, e.g. preisach, stiction+saturation (default: the "
+                  "last model of the data's ladder, else preisach)")
+      ->group(g);
+  cmd->add_option("--out", a->out, "the HTML file to write (default: DATA.report.html)")->group(g);
+  cmd->add_option("--validate", a->validate, "fraction of the record held out for validation")
+      ->group(g)
+      ->capture_default_str();
+  cmd->add_flag("--no-diagnose", a->no_diagnose,
+                "leave out the diagnosis (trial fits of every missing effect; takes seconds)")
+      ->group(g);
+  cmd->add_flag("--no-history", a->no_history,
+                "do not add this fit to the model history next to the data")
+      ->group(g);
+  cmd->add_flag("--no-plots", a->no_plots, "write the page without plots (gnuplot not needed)")
+      ->group(g);
+  cmd->add_option("--gnuplot", a->gnuplot,
+                  "the gnuplot program (default: $VALVEDIAG_GNUPLOT, else gnuplot from PATH)")
+      ->group(g);
+  cmd->add_option("--plot-timeout", a->timeout, "seconds before a hanging gnuplot is stopped")
+      ->check(CLI::Range(1.0, 600.0))
+      ->group(g)
+      ->capture_default_str();
+  cmd->callback([a, &exit_code] {
+    if (!(a->validate > 0.05 && a->validate < 0.9))
+      throw UsageError("--validate must lie in (0.05, 0.9)");
+    std::optional<ModelSpec> spec;
+    if (!a->model.empty()) spec = parse_model_spec(a->model);  // bad names: exit status 2
+    const std::string name = data_name(a->data);
+    const std::string out = a->out.empty() ? name + ".report.html" : a->out;
+    ReportOptions ro;
+    ro.gnuplot.program = a->gnuplot;
+    ro.gnuplot.timeout_s = a->timeout;
+    ro.plots = !a->no_plots;
+    // The cheap checks first: where the page goes and whether gnuplot runs, before the fits.
+    check_report_writable(out);
+    if (ro.plots) {
+      try {
+        (void)gnuplot_run("", ro.gnuplot);
+      } catch (const GnuplotMissing& e) {
+        throw GnuplotMissing(std::string(e.what()) + "; or leave the plots out: --no-plots");
+      }
+    }
+
+    std::vector<std::string> notes;
+    const LoopData d = load_data(a->data, notes);
+    check_identifiable_data(d, 200, "a report");
+    for (const auto& n : notes) std::cout << "note: " << n << "\n";
+    const std::string history = history_path_for(name);
+    auto ladder = load_history(history);
+    if (!spec) {
+      spec = parse_model_spec(ladder.empty() ? "preisach" : ladder.back().model);
+      std::cout << "note: model " << to_string(*spec)
+                << (ladder.empty() ? " (no model history for this data yet)"
+                                   : " (the last model of this data's ladder)")
+                << "\n";
+    }
+    const double Ts = d.sample_period();
+    Diagnosis diag;
+    ModelFit fit;
+    ResidualAnalysis where;
+    std::cout << "fitting " << to_string(*spec)
+              << (a->no_diagnose ? "" : " and diagnosing it (trial fits of the missing effects)")
+              << " ..." << std::endl;
+    if (!a->no_diagnose) {
+      DiagnoseOptions o;
+      o.validation_fraction = a->validate;
+      diag = diagnose(d.op, d.pv, Ts, *spec, o);
+      fit = diag.steps.front().fit;
+      where = diag.steps.front().residual;
+    } else {
+      ModelFitOptions mo;
+      mo.validation_fraction = a->validate;
+      fit = fit_model(d.op, d.pv, Ts, *spec, mo);
+      if (fit.status != ModelFitStatus::NoStableModel) {
+        ResidualAnalysisOptions rao;
+        rao.model_delay = static_cast<std::size_t>(std::max(0, fit.structure.nk + 1));
+        where = analyse_residual(d.op, d.pv, fit.y_sim, fit.first_sample, fit.estimation_end, rao);
+      }
+    }
+    if (fit.status == ModelFitStatus::NoStableModel) {
+      std::cerr << "error: no stable model " << to_string(*spec)
+                << " fits this data: no report written (try another --model)\n";
+      exit_code = kNoModel;
+      return;
+    }
+    if (!a->no_history && (ladder.empty() || ladder.back().model != to_string(fit.spec))) {
+      append_history(history, {history_entry(fit, "report")});
+      ladder = load_history(history);
+    }
+    ReportContent c;
+    c.data = &d;
+    c.data_name = name;
+    c.fit = &fit;
+    c.where = &where;
+    if (!a->no_diagnose) {
+      c.diagnosis = &diag;
+      c.diagnosis_command = "valvediag diagnose " + name + " --model " + to_string(*spec);
+    }
+    c.ladder = ladder;
+    c.notes = notes;
+    c.generator = "valvediag report";
+    const ReportFile r = write_report_file(out, c, ro);
+    std::printf("model:     %s: %.2f %% estimation, %.2f %% validation\n",
+                to_string(fit.spec).c_str(), fit.fitness_percent, fit.validation_fitness_percent);
+    if (!a->no_diagnose) std::printf("verdict:   %s\n", verdict(diag).c_str());
+    std::fflush(stdout);
+    std::cout << report_file_summary(out, r);
+    exit_code = kOk;
+  });
+}
+
+}  // namespace valvediag::cli
