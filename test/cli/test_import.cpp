@@ -1,0 +1,198 @@
+// valvediag import and FILE.mat --loop in the analysis commands, as a user runs them: the
+// stiction database benchmark, the Tennessee Eastman matrix and .mat files written here.
+#include <doctest/doctest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "../common/run_cli.hpp"
+#include "../io/mat_fixtures.hpp"
+
+namespace fs = std::filesystem;
+using valvediag::test::CliResult;
+
+namespace {
+
+const std::string kData = VALVEDIAG_DATA_DIR;
+const std::string kBenchmark = kData + "/benchmark.mat";
+const std::string kTe14 = kData + "/tennessee-eastman/m1d14.mat";
+
+fs::path tmp_dir() {
+  const fs::path p = fs::path(VALVEDIAG_TMP) / "import";
+  fs::create_directories(p);
+  return p;
+}
+
+std::string tmp(const std::string& name) {
+  return (tmp_dir() / name).string();
+}
+
+CliResult run(const std::vector<std::string>& args) {
+  return valvediag::test::run_cli(VALVEDIAG_BIN, args, tmp_dir(), 300.0);
+}
+
+bool has(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+// The line of `text` that holds `part`.
+std::string line_with(const std::string& text, const std::string& part) {
+  std::istringstream s(text);
+  std::string line;
+  while (std::getline(s, line))
+    if (has(line, part)) return line;
+  return "";
+}
+
+std::vector<std::string> with(std::vector<std::string> a, const std::vector<std::string>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
+const std::vector<std::string> kSmallGrid{"--na-max", "1", "--nb-max",    "1", "--nk-max", "2",
+                                          "--L-max",  "8", "--no-history"};
+
+}  // namespace
+
+TEST_CASE("import lists the loops of the stiction database benchmark") {
+  const CliResult r = run({"import", kBenchmark});
+  INFO(r.out);
+  CHECK(r.status == 0);
+  CHECK(has(r.out, "93 loop(s)"));
+  CHECK(has(r.out,
+            "groups: benchmark.buildings 8, benchmark.chemicals 63, benchmark.pulpPapers 13, "
+            "benchmark.power 5, benchmark.mining 1, benchmark.metals 3"));
+  const std::string l23 = line_with(r.out, "benchmark.chemicals.loop23 ");
+  CHECK(has(l23, " 1500 "));
+  CHECK(has(l23, " 10 "));
+  CHECK(has(l23, "OP  (no PV)"));
+  CHECK(has(r.out, "no loop has PV"));
+
+  SUBCASE("a loop without PV: a clear message, exit status 2") {
+    const CliResult f = run({"fit", kBenchmark, "--loop", "chemicals.loop23"});
+    CHECK(f.status == 2);
+    CHECK(has(f.out,
+              "loop 'benchmark.chemicals.loop23': no PV field (fields present: "
+              "oscillation, Ts, OP)"));
+    const CliResult d =
+        run({"import", kBenchmark, "--loop", "chemicals.loop23", "--db", tmp("nopv.sqlite")});
+    CHECK(d.status == 2);
+    CHECK(has(d.out, "no PV field"));
+  }
+  SUBCASE("several loops and no --loop: the message lists them") {
+    const CliResult f = run({"fit", kBenchmark});
+    CHECK(f.status == 2);
+    CHECK(has(f.out, "93 loops in the file; choose one with --loop PATH"));
+    CHECK(has(f.out, "benchmark.buildings.loop1"));
+  }
+  SUBCASE("an OP-only loop imports as t, op") {
+    const CliResult i =
+        run({"import", kBenchmark, "--loop", "chemicals.loop23", "--out", tmp("l23.csv")});
+    CHECK(i.status == 0);
+    CHECK(has(i.out, "1500 samples"));
+    std::ifstream f(tmp("l23.csv"));
+    std::string header;
+    std::getline(f, header);
+    CHECK(header == "t,op");
+  }
+}
+
+TEST_CASE("import a loop of a .mat file to CSV, to a recording, or fit the .mat directly") {
+  const std::string mat = tmp("runs.mat");
+  valvediag::test::write_runs_file(mat, MAT_FT_MAT5, MAT_COMPRESSION_ZLIB);
+
+  const CliResult list = run({"import", mat});
+  INFO(list.out);
+  CHECK(list.status == 0);
+  CHECK(has(list.out, "2 loop(s)"));
+  CHECK(has(line_with(list.out, "runs(2)"), "OP PV SP"));
+
+  const CliResult to_csv = run({"import", mat, "--loop", "runs(2)", "--out", tmp("r2.csv")});
+  CHECK(to_csv.status == 0);
+  CHECK(has(to_csv.out, "wrote " + tmp("r2.csv") + ": 400 samples of loop runs(2) (Ts 0.5 s)"));
+
+  const CliResult from_csv = run(with({"fit", tmp("r2.csv")}, kSmallGrid));
+  const CliResult direct = run(with({"fit", mat, "--loop", "runs(2)"}, kSmallGrid));
+  INFO(from_csv.out);
+  INFO(direct.out);
+  CHECK(from_csv.status == 0);
+  CHECK(direct.status == 0);
+  CHECK(has(direct.out, mat + ":runs(2) (400 samples, Ts 0.500 s"));
+  const std::string fitness = line_with(from_csv.out, "fitness:");
+  CHECK_FALSE(fitness.empty());
+  CHECK(line_with(direct.out, "fitness:") == fitness);  // the same data, bit for bit
+
+  SUBCASE("into a recording: fit --db --loop reads it") {
+    const std::string db = tmp("imported.sqlite");
+    fs::remove(db);
+    const CliResult i = run({"import", mat, "--loop", "runs(2)", "--db", db});
+    INFO(i.out);
+    CHECK(i.status == 0);
+    CHECK(has(i.out, "stored loop runs_2 in " + db));
+    const CliResult f = run(with({"fit", "--db", db, "--loop", "runs_2"}, kSmallGrid));
+    INFO(f.out);
+    CHECK(f.status == 0);
+    CHECK(line_with(f.out, "fitness:") == fitness);
+  }
+  SUBCASE("every loop into a folder") {
+    const std::string dir = tmp("all");
+    fs::remove_all(dir);
+    const CliResult i = run({"import", mat, "--out-dir", dir});
+    CHECK(i.status == 0);
+    CHECK(has(i.out, "2 loop(s) written"));
+    CHECK(fs::exists(fs::path(dir) / "runs_1.csv"));
+    CHECK(fs::exists(fs::path(dir) / "runs_2.csv"));
+  }
+  SUBCASE("wrong uses: exit status 2 with a message") {
+    CHECK(run({"import", tmp("r2.csv")}).status == 2);
+    const CliResult nowhere = run({"import", mat, "--loop", "runs(2)"});
+    CHECK(nowhere.status == 2);
+    CHECK(has(nowhere.out, "--out"));
+    CHECK(run({"import", mat, "--loop", "runs(9)", "--out", tmp("x.csv")}).status == 2);
+    const CliResult csv_loop = run({"fit", tmp("r2.csv"), "--loop", "runs(2)"});
+    CHECK(csv_loop.status == 2);
+    CHECK(has(csv_loop.out, "--loop goes with --db or a .mat file"));
+    const CliResult csv_opt = run({"fit", mat, "--loop", "runs(2)", "--delimiter", "tab"});
+    CHECK(csv_opt.status == 2);
+    CHECK(has(csv_opt.out, "for CSV files, not .mat"));
+    std::ofstream(tmp("garbage.mat")) << std::string(300, 'x');
+    const CliResult garbage = run({"fit", tmp("garbage.mat")});
+    CHECK(garbage.status == 2);
+    CHECK(has(garbage.out, "not a MATLAB v5/v7/v7.3 MAT-file"));
+  }
+}
+
+TEST_CASE("Tennessee Eastman m1d14: the cooling-water loop named by matrix columns") {
+  const std::vector<std::string> loop{"--op", "51", "--pv", "21", "--sample-period", "36"};
+  const CliResult list = run({"import", kTe14});
+  CHECK(list.status == 0);
+  CHECK(has(line_with(list.out, "  m1d14 "), "matrix, 81 columns"));
+
+  const CliResult i = run(with({"import", kTe14, "--loop", "m1d14", "--out", tmp("te.csv")}, loop));
+  INFO(i.out);
+  CHECK(i.status == 0);
+  CHECK(has(i.out, "op column 51, pv column 21, Ts 36 s"));
+  CHECK(has(i.out, "7201 samples of loop m1d14 (Ts 36 s)"));
+  std::ifstream f(tmp("te.csv"));
+  std::string line, last;
+  std::size_t rows = 0;
+  std::getline(f, line);
+  CHECK(line == "t,op,pv");
+  while (std::getline(f, line)) {
+    ++rows;
+    last = line;
+  }
+  CHECK(rows == 7201);
+  CHECK(last.rfind("259200,", 0) == 0);  // 72 h
+
+  const CliResult fit = run(with(with({"fit", kTe14}, loop), kSmallGrid));
+  INFO(fit.out);
+  CHECK(fit.status == 0);
+  CHECK(has(fit.out, "m1d14.mat:m1d14 (7201 samples, Ts 36.000 s"));
+  const CliResult no_period = run({"fit", kTe14, "--op", "51", "--pv", "21"});
+  CHECK(no_period.status == 2);
+  CHECK(has(no_period.out, "--sample-period"));
+}
