@@ -95,10 +95,18 @@ std::string explain(const std::string& effect, const ModelFit& trial,
   if (effect == "delay")
     return fmt("the dead time is longer than modelled: about %.0f samples: add `delay`",
                static_cast<double>(trial.structure.nk + 1));
-  if (effect == "order")
+  if (effect == "order") {
+    const double lag = param(p, "extra_lag", 0.0);
+    if (lag > 0)
+      return fmt(
+          "the process has more lags than modelled (an extra lag of about %.0f s, na = %.0f, "
+          "nb = %.0f): add `order` (or check for a slow actuator: the data cannot tell "
+          "which)",
+          lag, static_cast<double>(trial.structure.na), static_cast<double>(trial.structure.nb));
     return fmt(
         "the process has more lags than modelled (na = %.0f, nb = %.0f fit better): add `order`",
         static_cast<double>(trial.structure.na), static_cast<double>(trial.structure.nb));
+  }
   if (effect == "integrator")
     return "PV integrates the flow through the valve (a level or pressure in a closed vessel): add "
            "`integrator`";

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <exception>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 
@@ -515,7 +516,16 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
   fit.first_sample = est.start();
   fit.estimation_end = est.end();
   const auto [umin, umax] = std::minmax_element(u.begin(), u.end());
-  Search s(u, est, InputRange{*umin, *umax, Ts});
+  // With `order` the extra lag is searched over the base na, nb range (the lag stands for the
+  // extra orders there, at a quarter of the cost); the final fit uses the whole range.
+  std::optional<ArxEstimator> narrow;
+  if (spec.has("order")) {
+    LinearOptions ln = lo;
+    ln.range.na_max = std::min(lo.range.na_max, std::max(opt.structure.na_max, ln.range.na_min));
+    ln.range.nb_max = std::min(lo.range.nb_max, std::max(opt.structure.nb_max, ln.range.nb_min));
+    narrow.emplace(y, ln);
+  }
+  Search s(u, narrow ? *narrow : est, InputRange{*umin, *umax, Ts});
   for (const auto& e : spec.effects) {
     const auto c = search_parameters(e, s.range);
     if (c.empty()) continue;

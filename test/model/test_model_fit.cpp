@@ -216,7 +216,11 @@ TEST_CASE("stiction + saturation are fitted jointly") {
 }
 
 TEST_CASE("process effects: delay and order widen the structure grid") {
-  const LoopData d = custom_loop({}, 0.1, true, 11, 20.0);
+  // Measurement noise only: the dead time (20 s, nk 19-20) is recovered and the held-out part
+  // confirms it. (The output-error fit of the linear start, nk <= 10 with two poles, carries
+  // most of a dead time behind a smooth OP, so the gain is about a point, not the five points
+  // the biased least-squares start used to leave.)
+  const LoopData d = custom_loop({}, 0.1, false, 11, 20.0);
   const ModelFit lin = fit(d, "linear", split());
   const ModelFit del = fit(d, "delay", split());
   show(lin);
@@ -224,9 +228,43 @@ TEST_CASE("process effects: delay and order widen the structure grid") {
   CHECK(lin.structure.nk <= 10);
   CHECK(param(del, "delay", "nk") == doctest::Approx(19.5).epsilon(0.05));
   CHECK(param(del, "delay", "dead_time") == doctest::Approx(param(del, "delay", "nk") * 1.0));
-  CHECK(del.validation_fitness_percent > lin.validation_fitness_percent + 5.0);
+  CHECK(del.validation_fitness_percent > lin.validation_fitness_percent + 0.3);
+  CHECK(del.fitness_percent > lin.fitness_percent + 1.0);
   const ModelFit ord = fit(d, "order", split());
   CHECK(ord.fitness_percent >= lin.fitness_percent - 0.2);  // a wider grid never fits worse
+  // With heavy filtered load noise as well, the output-error fit of the linear start carries
+  // much of the dead time with its two poles: delay still finds it, the held-out gain is small.
+  const LoopData n = custom_loop({}, 0.1, true, 11, 20.0);
+  const ModelFit nlin = fit(n, "linear", split());
+  const ModelFit ndel = fit(n, "delay", split());
+  show(nlin);
+  show(ndel);
+  CHECK(param(ndel, "delay", "nk") == doctest::Approx(19.5).epsilon(0.15));
+  CHECK(ndel.fitness_percent > nlin.fitness_percent);
+  CHECK(ndel.validation_fitness_percent > nlin.validation_fitness_percent);
+}
+
+TEST_CASE("order: an extra lag and wider orders carry a third lag; the linear start cannot") {
+  const LoopData d = scenario_data("third-order", 1);
+  const ModelFit lin = fit(d, "linear", split());
+  const ModelFit ord = fit(d, "order", split());
+  show(lin);
+  show(ord);
+  CHECK(param(ord, "order", "extra_lag") > 5.0);
+  CHECK(ord.validation_fitness_percent > lin.validation_fitness_percent + 1.0);
+  CHECK(ord.fitness_percent > lin.fitness_percent + 2.0);
+}
+
+TEST_CASE("output-error refinement: never worse than least squares, better under load noise") {
+  const LoopData d = scenario_data("third-order", 2);
+  ModelFitOptions ls = split();
+  ls.output_error_iterations = 0;
+  const ModelFit a = fit(d, "linear", ls);
+  const ModelFit b = fit(d, "linear", split());
+  show(a);
+  show(b);
+  CHECK(b.fitness_percent >= a.fitness_percent - 1e-9);
+  CHECK(b.fitness_percent > a.fitness_percent + 2.0);
 }
 
 TEST_CASE("integrator and disturbance forms") {

@@ -67,6 +67,25 @@ TEST_CASE("Second order plus dead time: exact step responses") {
       return K * (1.0 - (t1 * std::exp(-t / t1) - t2 * std::exp(-t / t2)) / (t1 - t2));
     });
   }
+  SUBCASE("a third lag (tau3)") {
+    const double K = 1.2, t[3] = {30.0, 20.0, 12.0};
+    ProcessSpec spec = second_order_process(K, t[0], t[1], 2.5, 5.0);
+    spec.tau3 = t[2];
+    check_step(spec, 1.0, 600, [&](double time) {
+      // 1 - sum_i tau_i^2 e^{-t/tau_i} / prod_{j != i} (tau_i - tau_j)
+      double s = 0.0;
+      for (int i = 0; i < 3; ++i) {
+        double den = 1.0;
+        for (int j = 0; j < 3; ++j)
+          if (j != i) den *= t[i] - t[j];
+        s += t[i] * t[i] * std::exp(-time / t[i]) / den;
+      }
+      return K * (1.0 - s);
+    });
+    CHECK(describe(spec).find("tau3=12 s") != std::string::npos);
+    spec.tau3 = -1.0;
+    CHECK_THROWS_AS(DiscreteProcess(spec, 1.0), std::invalid_argument);
+  }
   SUBCASE("underdamped wn, zeta") {
     const double K = 0.8, wn = 0.2, z = 0.3;
     const double wd = wn * std::sqrt(1 - z * z);

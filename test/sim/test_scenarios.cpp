@@ -246,3 +246,48 @@ TEST_CASE("Scenario file errors name the file, the line and the key") {
     CHECK_THROWS_AS(load_scenario_file(kConfigDir + "no-such-scenario.toml"), ScenarioFileError);
   }
 }
+
+TEST_CASE("The simulator records where each effect acted") {
+  SUBCASE("saturation: exactly where the limits clamp the valve") {
+    const ScenarioRun r = run_scenario_traced(scenario_by_name("saturation"), 1, 0);
+    const EffectActivity* a = r.find("saturation");
+    REQUIRE(a != nullptr);
+    CHECK(a->samples > 50);
+    std::size_t clamped = 0;
+    for (std::size_t k = 0; k < r.data.size(); ++k) {
+      const bool at_limit = r.data.op[k] > 70.0 || r.data.op[k] < 5.0;
+      clamped += at_limit;
+      CHECK(a->overlaps(k, k + 1) == at_limit);
+    }
+    CHECK(clamped == a->samples);
+    CHECK(r.find("disturbance") != nullptr);
+    CHECK(r.find("stiction") == nullptr);
+  }
+  SUBCASE("stiction: stuck while OP moves; the valve stays put inside the intervals") {
+    const ScenarioRun r = run_scenario_traced(scenario_by_name("paper-ex1"), 1, 0);
+    const EffectActivity* a = r.find("stiction");
+    REQUIRE(a != nullptr);
+    REQUIRE(!a->intervals.empty());
+    CHECK(a->samples > r.data.size() / 4);
+    const auto [b, e] = a->intervals.front();
+    for (std::size_t k = b + 1; k < e; ++k) CHECK(r.data.mv[k] == r.data.mv[b]);
+    CHECK(r.find("delay") != nullptr);  // 2.5 s dead time = 5 samples
+  }
+  SUBCASE("process effects: delay, order, integrator, and a linear valve records nothing") {
+    const ScenarioRun d = run_scenario_traced(scenario_by_name("dead-time"), 1, 0);
+    REQUIRE(d.find("delay") != nullptr);
+    CHECK(d.find("delay")->samples > 0);
+    CHECK(d.activity.size() == 2);  // delay and the filtered load noise
+    const ScenarioRun o = run_scenario_traced(scenario_by_name("third-order"), 1, 0);
+    REQUIRE(o.find("order") != nullptr);
+    CHECK(o.find("order")->samples > 0);
+    const ScenarioRun l = run_scenario_traced(scenario_by_name("level"), 1, 0);
+    REQUIRE(l.find("integrator") != nullptr);
+    CHECK(l.find("integrator")->samples > 0);
+    const ScenarioRun a = run_scenario_traced(scenario_by_name("slow-actuator"), 1, 0);
+    REQUIRE(a.find("actuator-lag") != nullptr);
+    CHECK(a.find("actuator-lag")->samples > 0);
+    // The traced run is the plain run.
+    CHECK(a.data.pv == run_scenario(scenario_by_name("slow-actuator"), 1, 0).pv);
+  }
+}
