@@ -66,19 +66,31 @@ void diagnose_and_report(const LoopData& d, const FitRun& run, const std::string
             << step << "diagnosing: which effect is missing from `linear` (valvediag diagnose "
             << csv << ") ..." << std::flush;
   const auto t0 = std::chrono::steady_clock::now();
-  const Diagnosis diag = diagnose(d.op, d.pv, Ts, parse_model_spec("linear"));
-  std::printf(" done in %.1f s\n",
-              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-  const auto& base = diag.last().fit;
-  std::printf("  linear: %.2f %% estimation, %.2f %% validation; the best trial fits:\n",
-              base.fitness_percent, base.validation_fitness_percent);
-  const auto& findings = diag.last().findings;
-  for (std::size_t i = 0; i < findings.size() && i < 3; ++i)
-    std::printf("  %zu. + %-15s score %.2f, %+.2f points on validation\n", i + 1,
-                findings[i].effect.c_str(), findings[i].score, findings[i].validation_gain_percent);
-  std::printf("verdict:   %s\n", verdict(diag).c_str());
+  Diagnosis diag;
+  std::string no_diagnosis;
+  try {
+    diag = diagnose(d.op, d.pv, Ts, parse_model_spec("linear"));
+  } catch (const std::invalid_argument& e) {
+    // No stable linear model on this record (a short one): the report goes without a diagnosis.
+    no_diagnosis = std::string("The diagnosis could not run: ") + e.what();
+  }
   std::vector<HistoryEntry> entries;
-  for (const auto& st : diag.steps) entries.push_back(history_entry(st.fit, "demo: diagnose"));
+  if (!no_diagnosis.empty()) {
+    std::cout << " not possible\nnote:      " << no_diagnosis << "\n";
+  } else {
+    std::printf(" done in %.1f s\n",
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    const auto& base = diag.last().fit;
+    std::printf("  linear: %.2f %% estimation, %.2f %% validation; the best trial fits:\n",
+                base.fitness_percent, base.validation_fitness_percent);
+    const auto& findings = diag.last().findings;
+    for (std::size_t i = 0; i < findings.size() && i < 3; ++i)
+      std::printf("  %zu. + %-15s score %.2f, %+.2f points on validation\n", i + 1,
+                  findings[i].effect.c_str(), findings[i].score,
+                  findings[i].validation_gain_percent);
+    std::printf("verdict:   %s\n", verdict(diag).c_str());
+    for (const auto& st : diag.steps) entries.push_back(history_entry(st.fit, "demo: diagnose"));
+  }
   const ModelFit fit = model_fit_of(run.result, d.op, d.pv, Ts);
   entries.push_back(history_entry(fit, "demo: fit (paper's full grid)"));
   const std::string history = history_path_for(csv);
@@ -91,8 +103,12 @@ void diagnose_and_report(const LoopData& d, const FitRun& run, const std::string
   c.data_name = csv;
   c.fit = &fit;
   c.where = &where;
-  c.diagnosis = &diag;
-  c.diagnosis_command = "valvediag diagnose " + csv;
+  if (no_diagnosis.empty()) {
+    c.diagnosis = &diag;
+    c.diagnosis_command = "valvediag diagnose " + csv;
+  } else {
+    c.notes.push_back(no_diagnosis);
+  }
   c.ladder = load_history(history);
   c.notes.push_back(offline ? "Simulated without the bus (valvediag demo --offline)."
                             : "Recorded through the Modbus TCP driver from a simulated PLC "

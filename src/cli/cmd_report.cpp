@@ -152,13 +152,21 @@ void add_report(CLI::App& app, int& exit_code) {
     std::cout << "fitting " << to_string(*spec)
               << (a->no_diagnose ? "" : " and diagnosing it (trial fits of the missing effects)")
               << " ..." << std::endl;
+    bool diagnosed = false;
     if (!a->no_diagnose) {
       DiagnoseOptions o;
       o.validation_fraction = a->validate;
-      diag = diagnose(d.op, d.pv, Ts, *spec, o);
-      fit = diag.steps.front().fit;
-      where = diag.steps.front().residual;
-    } else {
+      try {
+        diag = diagnose(d.op, d.pv, Ts, *spec, o);
+        fit = diag.steps.front().fit;
+        where = diag.steps.front().residual;
+        diagnosed = true;
+      } catch (const std::invalid_argument& e) {
+        // The model itself does not fit (no stable linear part): said below, without a diagnosis.
+        notes.push_back(std::string("The diagnosis could not run: ") + e.what());
+      }
+    }
+    if (!diagnosed) {
       ModelFitOptions mo;
       mo.validation_fraction = a->validate;
       fit = fit_model(d.op, d.pv, Ts, *spec, mo);
@@ -183,7 +191,7 @@ void add_report(CLI::App& app, int& exit_code) {
     c.data_name = name;
     c.fit = &fit;
     c.where = &where;
-    if (!a->no_diagnose) {
+    if (diagnosed) {
       c.diagnosis = &diag;
       c.diagnosis_command = "valvediag diagnose " + name + " --model " + to_string(*spec);
     }
@@ -193,7 +201,7 @@ void add_report(CLI::App& app, int& exit_code) {
     const ReportFile r = write_report_file(out, c, ro);
     std::printf("model:     %s: %.2f %% estimation, %.2f %% validation\n",
                 to_string(fit.spec).c_str(), fit.fitness_percent, fit.validation_fitness_percent);
-    if (!a->no_diagnose) std::printf("verdict:   %s\n", verdict(diag).c_str());
+    if (diagnosed) std::printf("verdict:   %s\n", verdict(diag).c_str());
     std::fflush(stdout);
     std::cout << report_file_summary(out, r);
     exit_code = kOk;

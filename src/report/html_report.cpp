@@ -316,7 +316,7 @@ class Plot {
           "set encoding utf8\nset datafile missing '?'\n"
           "set grid lc rgb '#dddddd' lw 1\nset border lc rgb '#444444'\n"
           "set key tmargin right horizontal nobox\n"
-          "set tics nomirror\n";
+          "set tics nomirror\nset autoscale xfix\n";
   }
   // A data block of the rows given: each row's cells already formatted.
   std::string block(const std::vector<std::string>& rows) {
@@ -615,7 +615,7 @@ PlotJob ladder_plot(const ReportContent& c) {
                    dnum(h.validation_fitness_percent));
   }
   const std::string b = p.block(rows);
-  p.out() << "set lmargin 10\nset rmargin 3\nset bmargin 6\nset key bottom right\n"
+  p.out() << "set lmargin 10\nset rmargin 3\nset bmargin 6\n"
              "set ylabel 'fitness (%)'\nset yrange [-100<*:100]\nset xrange [0.5:"
           << c.ladder.size() << ".5]\nset xtics rotate by -25 nomirror\n"
           << "plot " << b
@@ -658,7 +658,8 @@ std::string params_text(const std::vector<NamedValue>& p) {
   std::string s;
   for (const auto& v : p) {
     if (!s.empty()) s += ", ";
-    s += v.name + " " + num(v.value, 3) + (v.unit.empty() ? "" : " " + v.unit);
+    const bool whole = v.value == std::round(v.value) && std::abs(v.value) < 1e6;
+    s += v.name + " " + num(v.value, whole ? 0 : 3) + (v.unit.empty() ? "" : " " + v.unit);
   }
   return s;
 }

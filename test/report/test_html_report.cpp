@@ -1,0 +1,265 @@
+// The report library: its pieces, gnuplot as a child process, and the page from a simulated
+// sticky loop.
+#include <doctest/doctest.h>
+
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "page_checks.hpp"
+#include "valvediag/gnuplot.hpp"
+#include "valvediag/html_report.hpp"
+#include "valvediag/scenarios.hpp"
+
+using namespace valvediag;
+using report_test::check_self_contained;
+using report_test::count;
+using report_test::figure;
+using report_test::has_plot;
+
+TEST_CASE("html_escape: markup characters as entities, bad bytes replaced, UTF-8 kept") {
+  CHECK(html_escape("<a href=\"x\">&'") == "&lt;a href=&quot;x&quot;&gt;&amp;&#39;");
+  CHECK(html_escape("\xC2\xB5m, 5 \xE2\x80\x93 6") == "\xC2\xB5m, 5 \xE2\x80\x93 6");
+  CHECK(html_escape("a\xFFz") == "a\xEF\xBF\xBDz");
+  CHECK(html_escape("\xC0\xAF") == "\xEF\xBF\xBD\xEF\xBF\xBD");  // overlong '/'
+  CHECK(html_escape("x\x01y\tz\n") == "x\xEF\xBF\xBDy\tz\n");
+  CHECK(html_escape("\xE2\x82") == "\xEF\xBF\xBD\xEF\xBF\xBD");  // truncated sequence
+}
+
+TEST_CASE("minmax_decimate keeps the spikes, the ends and the time order") {
+  std::vector<double> y(10000);
+  for (std::size_t k = 0; k < y.size(); ++k) y[k] = std::sin(0.001 * static_cast<double>(k));
+  y[5003] = 50.0;
+  y[7777] = -50.0;
+  const auto idx = minmax_decimate(y, 0, y.size(), 300);
+  CHECK(idx.size() <= 601);
+  CHECK(idx.front() == 0);
+  CHECK(idx.back() == y.size() - 1);
+  for (std::size_t i = 1; i < idx.size(); ++i) CHECK(idx[i] > idx[i - 1]);
+  CHECK(std::find(idx.begin(), idx.end(), 5003u) != idx.end());
+  CHECK(std::find(idx.begin(), idx.end(), 7777u) != idx.end());
+  // Short ranges are kept whole; a sub-range stays inside its bounds.
+  CHECK(minmax_decimate(y, 100, 400, 300).size() == 300);
+  const auto sub = minmax_decimate(y, 2000, 9000, 100);
+  CHECK(sub.front() >= 2000);
+  CHECK(sub.back() == 8999);
+  CHECK(minmax_decimate(y, 5, 5, 10).empty());
+}
+
+TEST_CASE("Bode and step response of the linear block") {
+  // y(t) = 0.9 y(t-1) + 0.1 x(t-1): static gain 1, at Nyquist 0.1 / 1.9 and -180 degrees.
+  const std::vector<double> a{-0.9}, b{0.1};
+  const FrequencyResponse r = frequency_response(a, b, 0, false, 0.5, 200);
+  REQUIRE(r.f_hz.size() == 200);
+  CHECK(r.f_hz.back() == doctest::Approx(1.0));  // Nyquist at Ts = 0.5 s
+  CHECK(r.f_hz.front() == doctest::Approx(0.001));
+  CHECK(r.magnitude_db.front() == doctest::Approx(0.0).epsilon(0.01).scale(1));
+  CHECK(r.magnitude_db.back() == doctest::Approx(20 * std::log10(0.1 / 1.9)).epsilon(1e-6));
+  CHECK(r.phase_deg.back() == doctest::Approx(-180.0).epsilon(1e-6));
+  for (std::size_t k = 1; k < r.f_hz.size(); ++k) CHECK(r.phase_deg[k] <= r.phase_deg[k - 1]);
+  // A delay of 10 samples: the phase falls far below -360 degrees, unwrapped without jumps.
+  const FrequencyResponse d = frequency_response(a, b, 9, false, 0.5, 400);
+  CHECK(d.phase_deg.back() < -1000.0);
+  for (std::size_t k = 1; k < d.f_hz.size(); ++k)
+    CHECK(std::abs(d.phase_deg[k] - d.phase_deg[k - 1]) < 90.0);
+
+  const auto y = step_response(a, b, 2, false, 200);
+  CHECK(y[0] == 0.0);
+  CHECK(y[2] == 0.0);  // nk = 2: the output moves at sample 3
+  CHECK(y[3] == doctest::Approx(0.1));
+  CHECK(y[4] == doctest::Approx(0.19));
+  CHECK(y.back() == doctest::Approx(1.0).epsilon(1e-6));
+  const std::size_t n = settling_samples(a, b, 0, false, 1000);
+  CHECK(n >= 44);  // 0.9^k < 1 % from k = 44
+  CHECK(n <= 80);
+  // Integrating: A = (1 - 0.5 q^-1)(1 - q^-1), the step response ends as a ramp of slope 2.
+  const auto ramp = step_response({-0.5}, {1.0}, 0, true, 100);
+  CHECK(ramp[99] - ramp[98] == doctest::Approx(2.0));
+  const FrequencyResponse ri = frequency_response({-0.5}, {1.0}, 0, true, 1.0, 100);
+  CHECK(ri.magnitude_db.front() > 40.0);  // 1 / (1 - q^-1) grows without bound at 0
+}
+
+TEST_CASE("inline_svg: declaration dropped, ids and references prefixed") {
+  const std::string svg =
+      "<?xml version=\"1.0\"?>\n<svg width='10'><defs><path id='gpPt0' d='M0,0'/></defs>"
+      "<use xlink:href='#gpPt0'/><g id=\"clip\" clip-path=\"url(#clip)\"></g></svg>\n\n";
+  const std::string s = inline_svg(svg, "plot-x");
+  CHECK(s.rfind("<svg", 0) == 0);
+  CHECK(s.find("<?xml") == std::string::npos);
+  CHECK(s.find("id='plot-x-gpPt0'") != std::string::npos);
+  CHECK(s.find("href='#plot-x-gpPt0'") != std::string::npos);
+  CHECK(s.find("id=\"plot-x-clip\"") != std::string::npos);
+  CHECK(s.find("url(#plot-x-clip)") != std::string::npos);
+  CHECK(s.back() == '>');
+}
+
+TEST_CASE("gnuplot runs as a child: SVG back, errors and hangs reported, no shell") {
+  SUBCASE("an SVG comes back on standard output, also when it is larger than a pipe") {
+    std::string script = "set terminal svg size 400,300\n$D << EOD\n";
+    for (int k = 0; k < 20000; ++k)
+      script += std::to_string(k) + " " + std::to_string(std::sin(0.37 * k)) + "\n";
+    script += "EOD\nplot $D with lines\n";
+    REQUIRE(script.size() > 200000);
+    const std::string svg = gnuplot_run(script);
+    CHECK(svg.find("<svg") != std::string::npos);
+    CHECK(svg.find("</svg>") != std::string::npos);
+    CHECK(svg.size() > 65536);
+  }
+  SUBCASE("a program that does not exist: GnuplotMissing naming the package") {
+    GnuplotOptions o;
+    o.program = "/nonexistent/dir/gnuplot";
+    try {
+      gnuplot_run("plot x\n", o);
+      FAIL("expected GnuplotMissing");
+    } catch (const GnuplotMissing& e) {
+      CHECK(std::string(e.what()).find("gnuplot-nox") != std::string::npos);
+      CHECK(std::string(e.what()).find("/nonexistent/dir/gnuplot") != std::string::npos);
+    }
+  }
+  SUBCASE("a script error: GnuplotError with gnuplot's own message") {
+    try {
+      gnuplot_run("set terminal svg\nplot no_such_function(x)\n");
+      FAIL("expected GnuplotError");
+    } catch (const GnuplotError& e) {
+      CHECK(std::string(e.what()).find("no_such_function") != std::string::npos);
+    }
+  }
+  SUBCASE("a hanging gnuplot is stopped at the time limit") {
+    GnuplotOptions o;
+    o.timeout_s = 0.5;
+    const auto t0 = std::chrono::steady_clock::now();
+    CHECK_THROWS_AS(gnuplot_run("pause 30\n", o), GnuplotError);
+    CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 5.0);
+  }
+  SUBCASE("a child that exits without reading does not take us down with SIGPIPE") {
+    GnuplotOptions o;
+    o.program = "true";
+    const std::string big(1 << 20, '#');
+    CHECK(gnuplot_run(big, o).empty());
+  }
+  SUBCASE("gnuplot_quote") {
+    CHECK(gnuplot_quote("it's") == "'it''s'");
+    CHECK(gnuplot_quote("a\nb") == "'a b'");
+  }
+}
+
+namespace {
+
+struct Fixture {
+  LoopData d;
+  ModelFit fit;
+  ResidualAnalysis where;
+  std::vector<HistoryEntry> ladder;
+
+  Fixture(const std::string& scenario, const std::string& model, std::size_t samples) {
+    d = run_scenario(scenario_by_name(scenario), 1, samples);
+    ModelFitOptions mo;
+    mo.validation_fraction = 0.3;
+    mo.preisach_L_max = 12;
+    fit = fit_model(d.op, d.pv, d.sample_period(), parse_model_spec(model), mo);
+    REQUIRE(fit.status != ModelFitStatus::NoStableModel);
+    ResidualAnalysisOptions ro;
+    ro.model_delay = static_cast<std::size_t>(fit.structure.nk + 1);
+    where = analyse_residual(d.op, d.pv, fit.y_sim, fit.first_sample, fit.estimation_end, ro);
+    HistoryEntry lin;
+    lin.model = "linear";
+    lin.fitness_percent = 80;
+    lin.validation_fitness_percent = -7;
+    ladder = {lin, history_entry(fit, "test")};
+  }
+  ReportContent content() const {
+    ReportContent c;
+    c.data = &d;
+    c.data_name = "sticky <loop> & \"friends\".csv";
+    c.fit = &fit;
+    c.where = &where;
+    c.ladder = ladder;
+    c.notes = {"a note with <markup>"};
+    return c;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all text escaped") {
+  Fixture fx("paper-ex1", "preisach", 1500);
+  REQUIRE(!fx.where.intervals.empty());
+  const HtmlReport r = html_report(fx.content());
+  const std::string& h = r.html;
+  check_self_contained(h);
+  CHECK(r.warnings.empty());
+  CHECK(r.plots.size() == 8);
+  for (const char* id : {"plot-trends", "plot-fit", "plot-residual", "plot-signature",
+                         "plot-preisach", "plot-bode", "plot-step", "plot-ladder"})
+    CHECK_MESSAGE(has_plot(h, id), id);
+  // Failing intervals shaded (gnuplot draws the rectangles as filled polygons in #f4b6b6).
+  CHECK(count(figure(h, "plot-fit"), "rgb(244, 182, 182)") >= fx.where.intervals.size());
+  CHECK(count(figure(h, "plot-residual"), "rgb(244, 182, 182)") >= fx.where.intervals.size());
+  CHECK(figure(h, "plot-fit").find("where the model fails") != std::string::npos);
+  CHECK(figure(h, "plot-preisach").find("nonzero weights") != std::string::npos);
+  CHECK(figure(h, "plot-bode").find("phase (deg)") != std::string::npos);
+  CHECK(figure(h, "plot-bode").find("|G| (dB)") != std::string::npos);
+  CHECK(figure(h, "plot-step").find("unit step") != std::string::npos);
+  CHECK(figure(h, "plot-ladder").find("validation") != std::string::npos);
+  CHECK(h.find("id=\"where-intervals\"") != std::string::npos);
+  CHECK(h.find("id=\"ladder-table\"") != std::string::npos);
+  CHECK(h.find("Not diagnosed") != std::string::npos);  // no diagnosis given
+  // Escaped, never raw.
+  CHECK(h.find("sticky &lt;loop&gt; &amp; &quot;friends&quot;.csv") != std::string::npos);
+  CHECK(h.find("<loop>") == std::string::npos);
+  CHECK(h.find("a note with &lt;markup&gt;") != std::string::npos);
+  CHECK(h.find("GNUPLOT") != std::string::npos);  // the footer names the plotting tool
+}
+
+TEST_CASE("a model without a Preisach valve: a note in place of the triangle") {
+  Fixture fx("paper-ex1", "stiction", 1500);
+  const HtmlReport r = html_report(fx.content());
+  check_self_contained(r.html);
+  CHECK(!has_plot(r.html, "plot-preisach"));
+  CHECK(figure(r.html, "plot-preisach").find("--model preisach") != std::string::npos);
+  CHECK(has_plot(r.html, "plot-signature"));
+  CHECK(has_plot(r.html, "plot-bode"));
+  CHECK(r.plots.size() == 7);
+}
+
+TEST_CASE("gnuplot missing: an error, or the page with notes in place of the plots") {
+  Fixture fx("linear-clean", "linear", 1000);
+  ReportOptions o;
+  o.gnuplot.program = "/nonexistent/gnuplot";
+  CHECK_THROWS_AS(html_report(fx.content(), o), GnuplotMissing);
+  o.require_plots = false;
+  const HtmlReport r = html_report(fx.content(), o);
+  check_self_contained(r.html);
+  CHECK(r.plots.empty());
+  CHECK(r.html.find("<svg") == std::string::npos);
+  CHECK(count(r.html, "gnuplot-nox") >= 7);  // each plot but the triangle (no Preisach valve)
+  CHECK(!r.warnings.empty());
+  ReportOptions none;
+  none.plots = false;
+  const HtmlReport q = html_report(fx.content(), none);
+  CHECK(q.html.find("<svg") == std::string::npos);
+  CHECK(q.html.find("--no-plots") != std::string::npos);
+}
+
+TEST_CASE("a long record stays small: plots are decimated") {
+  Fixture fx("linear-clean", "linear", 25000);
+  const HtmlReport r = html_report(fx.content());
+  check_self_contained(r.html);
+  CHECK(r.plots.size() == 7);  // no Preisach valve in `linear`
+  MESSAGE("HTML size for 25000 samples: " << r.html.size() / 1024 << " KB, gnuplot "
+                                          << r.plot_seconds << " s");
+  CHECK(r.html.size() < 800 * 1024);
+}
+
+TEST_CASE("html_report refuses a fit that does not belong to the data") {
+  Fixture fx("linear-clean", "linear", 1000);
+  LoopData other = fx.d;
+  other.t.resize(500);
+  other.op.resize(500);
+  other.pv.resize(500);
+  ReportContent c = fx.content();
+  c.data = &other;
+  CHECK_THROWS_AS(html_report(c), std::invalid_argument);
+  c.fit = nullptr;
+  CHECK_THROWS_AS(html_report(c), std::invalid_argument);
+}
