@@ -313,7 +313,7 @@ void add_sweep(CLI::App& app, int& exit_code) {
             }
           } else if (o.status == S::TimedOut) {
             char b[96];
-            std::snprintf(b, sizeof b, "stopped at the time limit of %.0f s (--loop-timeout)",
+            std::snprintf(b, sizeof b, "stopped at the time limit of %g s (--loop-timeout)",
                           timeout_s);
             r = failed(jobs[i], source, b);
           } else {

@@ -95,9 +95,9 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   try {
     dg = diagnose_auto(d.op, d.pv, d.sample_period(), ModelSpec{}, opt.diagnose);
   } catch (const std::invalid_argument& e) {
-    // The model library refuses data it cannot fit (too short after the split, ...).
-    a.verdict = "not-enough-data";
-    a.reason = e.what();
+    // The usability checks passed, so this is not the data's fault: say so, do not guess.
+    a.verdict = "error";
+    a.error = std::string("the diagnosis failed: ") + e.what();
     return finish();
   }
   const ModelFit& best = dg.last().fit;

@@ -187,6 +187,17 @@ std::vector<std::string> SweepStore::assessed_loops() {
 std::optional<double> recorded_end_s(const std::string& db_path, const std::string& loop) {
   sqlite3* db = open_db(db_path, SQLITE_OPEN_READONLY);
   sqlite3_stmt* s = nullptr;
+  // A database without recordings (only sweep results) has recorded nothing.
+  if (sqlite3_prepare_v2(db,
+                         "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'samples'",
+                         -1, &s, nullptr) == SQLITE_OK &&
+      sqlite3_step(s) != SQLITE_ROW) {
+    sqlite3_finalize(s);
+    sqlite3_close(db);
+    return std::nullopt;
+  }
+  sqlite3_finalize(s);
+  s = nullptr;
   const char* sql =
       "SELECT l.sample_period, (SELECT MAX(tick) FROM samples WHERE loop_id = l.id) FROM loops l "
       "WHERE l.name = ? ORDER BY l.run_id DESC LIMIT 1";
