@@ -9,6 +9,7 @@
 #include "valvediag/identification.hpp"
 #include "valvediag/loop_data.hpp"
 #include "valvediag/residual_analysis.hpp"
+#include "valvediag/stiction_quantification.hpp"
 
 namespace valvediag {
 
@@ -20,6 +21,10 @@ struct FitContext {
   std::string method;                          // "joint" or "alternation"
   const std::vector<double>* time = nullptr;   // time stamps, s (for intervals)
   const ResidualAnalysis* residual = nullptr;  // where the model fails (estimation window)
+  // The OP the model was fitted on: the stiction figures then probe the identified valve with the
+  // data's own OP over its estimation window (include/valvediag/stiction_quantification.hpp);
+  // without it, with reversal curves over the whole Preisach grid (region support unknown).
+  const std::vector<double>* op = nullptr;
 };
 
 const char* method_name(FitMethod m);
@@ -35,7 +40,12 @@ FitSeries fit_series(const IdentificationResult& r, const std::vector<double>& u
 ResidualAnalysis analyse_fit(const IdentificationResult& r, const std::vector<double>& u,
                              const std::vector<double>& y, const FitSeries& s);
 
+// The summary has a `stiction:` line (He's fs and fd from the Preisach model, per OP region), the
+// JSON a "stiction" object {fs_percent, fd_percent, band_percent, jump_percent, ..., regions}.
 std::string format_summary(const IdentificationResult& r, const FitContext& ctx);
 nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx);
+
+// The stiction figures of a fit (estimation window of ctx.op when given).
+StictionQuantification fit_stiction(const IdentificationResult& r, const FitContext& ctx);
 
 }  // namespace valvediag

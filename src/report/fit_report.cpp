@@ -135,7 +135,77 @@ nlohmann::json where_json(const ResidualAnalysis& a, const FitContext& ctx) {
   return w;
 }
 
+std::string format_stiction(const StictionQuantification& q) {
+  std::ostringstream o;
+  o << "stiction:  ";
+  if (!q.valid) return o.str() + q.summary + "\n";
+  if (q.stiction) {
+    o << "fs " << num(q.overall.fs_percent, 2) << " %, fd " << num(q.overall.fd_percent, 2)
+      << " % of travel (He; band " << num(q.overall.band_percent, 2) << " %, slip jump "
+      << num(q.overall.jump_percent, 2) << " %), resolution " << num(q.resolution_percent, 2)
+      << " %\n";
+    if (!q.jump_identified)
+      o << "           the data's sweeps are shorter than 2 fs: the split of the band into fs and "
+           "fd is not identified\n";
+  } else {
+    o << "none resolved (band below the grid step " << num(q.resolution_percent, 2) << " %)\n";
+  }
+  if (!q.data_given) o << "           (probed over the whole grid: the OP data was not given)\n";
+  for (const auto& g : q.regions) {
+    o << "           OP " << num(g.op_lo, 1) << "-" << num(g.op_hi, 1) << ": ";
+    if (!g.visited)
+      o << "not visited by the data (" << g.data_reversals << " reversals)";
+    else if (!g.valid || !std::isfinite(g.figures.fs_percent))
+      o << "not measured";
+    else if (!g.stiction)
+      o << "no stiction resolved";
+    else
+      o << "fs " << num(g.figures.fs_percent, 2) << " %, fd " << num(g.figures.fd_percent, 2)
+        << " %";
+    o << "\n";
+  }
+  return o.str();
+}
+
+nlohmann::json stiction_json(const StictionQuantification& q) {
+  using nlohmann::json;
+  json rg = json::array();
+  for (const auto& g : q.regions)
+    rg.push_back({{"op_lo", g.op_lo},
+                  {"op_hi", g.op_hi},
+                  {"fs_percent", number_or_null(g.figures.fs_percent)},
+                  {"fd_percent", number_or_null(g.figures.fd_percent)},
+                  {"band_percent", number_or_null(g.figures.band_percent)},
+                  {"jump_percent", number_or_null(g.figures.jump_percent)},
+                  {"visited", g.visited},
+                  {"valid", g.valid},
+                  {"stiction", g.stiction},
+                  {"data_reversals", g.data_reversals},
+                  {"samples", g.samples}});
+  return {{"fs_percent", number_or_null(q.overall.fs_percent)},
+          {"fd_percent", number_or_null(q.overall.fd_percent)},
+          {"band_percent", number_or_null(q.overall.band_percent)},
+          {"jump_percent", number_or_null(q.overall.jump_percent)},
+          {"he_fit_percent", number_or_null(q.overall.fit_percent)},
+          {"stiction", q.stiction},
+          {"valid", q.valid},
+          {"jump_identified", q.jump_identified},
+          {"resolution_percent", q.resolution_percent},
+          {"op_lo", q.op_lo},
+          {"op_hi", q.op_hi},
+          {"probe", q.data_given ? "data" : "grid"},
+          {"summary", q.summary},
+          {"regions", rg}};
+}
+
 }  // namespace
+
+StictionQuantification fit_stiction(const IdentificationResult& r, const FitContext& ctx) {
+  if (!ctx.op) return quantify_stiction(r.model);
+  const std::size_t end = std::min(ctx.op->size(), r.estimation_end);
+  const std::vector<double> op(ctx.op->begin(), ctx.op->begin() + static_cast<std::ptrdiff_t>(end));
+  return quantify_stiction(r.model, op);
+}
 
 std::string format_summary(const IdentificationResult& r, const FitContext& ctx) {
   std::ostringstream o;
@@ -171,6 +241,7 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
   for (double w : m.mu) nz += w > 0;
   o << "valve:     " << nz << " nonzero weights of " << m.grid.relay_count() << " relays (kappa "
     << num(r.best.kappa, 2) << ", BIC " << num(r.best.bic, 1) << ")\n";
+  o << format_stiction(fit_stiction(r, ctx));
   o << "memory:    initial relay state ";
   if (m.initial_history.size() <= 1) {
     o << "as if OP came up from its minimum\n";
@@ -226,6 +297,7 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
                     {"up_threshold", g.threshold(jj) + g.delta() / 2}});
     }
   j["mu"] = mu;
+  if (r.status == IdentificationStatus::Ok) j["stiction"] = stiction_json(fit_stiction(r, ctx));
   j["preisach"] = {{"umin", g.umin},
                    {"umax", g.umax},
                    {"L", g.L},

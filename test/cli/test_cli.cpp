@@ -142,6 +142,13 @@ TEST_CASE("fit writes the JSON keys and the series others rely on") {
   for (const auto& g : j["where"]["regions"])
     if (g["kind"] == "op-level") share += g["share"].get<double>();
   CHECK(share == doctest::Approx(1.0).epsilon(1e-9));  // OP-level regions partition the error
+  // Stiction figures of the Preisach model (He's fs and fd, per OP region).
+  CHECK(r.out.find("stiction:") != std::string::npos);
+  REQUIRE(j.contains("stiction"));
+  for (const char* k : {"fs_percent", "fd_percent", "band_percent", "jump_percent", "stiction",
+                        "valid", "resolution_percent", "regions"})
+    CHECK_MESSAGE(j["stiction"].contains(k), k);
+  CHECK(j["stiction"]["regions"].size() == 3);
   REQUIRE(!j["mu"].empty());
   for (const auto& w : j["mu"]) {
     CHECK(w["i"].get<int>() <= w["j"].get<int>());
