@@ -226,7 +226,8 @@ void add_import(CLI::App& app, int& exit_code) {
       ->group(o)
       ->excludes(out);
   cmd->add_option("--db", a->db, "store the loop in this recording (created if missing)")->group(o);
-  cmd->add_option("--name", a->name, "with --db: the loop's name there (default: its path)")
+  cmd->add_option("--name", a->name,
+                  "with --db: the loop's name there (default: its path, runs(2) as runs_2)")
       ->group(o);
   cmd->callback([a, &exit_code] {
     if (!is_mat_file(a->file))
