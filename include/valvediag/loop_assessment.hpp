@@ -32,7 +32,8 @@ struct LoopAssessment {
   // analysis itself failed (then `error` says why).
   std::string verdict;
   std::string reason;  // why the data is not enough, or what the verdict rests on
-  // Stiction band and slip jump in % of valve travel (OP range) when the model has them.
+  // He's fs (the static friction band) and the slip jump fs - fd, in % of valve travel (the OP
+  // range), when the model has friction (Kano: S and J; Stenman and deadband: d).
   double stiction_percent = kNaN, slip_jump_percent = kNaN;
   std::string model;  // best model (top of the climbed ladder)
   double fitness_percent = kNaN, validation_fitness_percent = kNaN;
@@ -41,13 +42,15 @@ struct LoopAssessment {
   LoopHealth health;
   double severity = 0.0;  // ranking key, higher first (see assess_loop)
   double elapsed_s = 0.0;
-  std::string error;  // the analysis failed: exception text, timeout, crash
+  std::string error;   // the analysis failed: exception text, timeout, crash
+  std::string report;  // the loop's HTML report, when one was written
 };
 
 // The whole assessment of one record. Throws only for programming errors; bad or short data
 // give verdict not-enough-data with the reason.
+// `diagnosis`: receives the climbed ladder when one was run (for the loop's report).
 LoopAssessment assess_loop(const LoopData& d, const std::string& name,
-                           const AssessOptions& opt = {});
+                           const AssessOptions& opt = {}, Diagnosis* diagnosis = nullptr);
 
 // Severity from verdict, stiction size and oscillation: stiction 6, deadband 5,
 // other-nonlinearity 3, no-valve-problem 1, not-enough-data 0, error -1; + 1 when the loop

@@ -19,7 +19,9 @@
 #include "stop_signal.hpp"
 #include "valvediag/bus_factory.hpp"
 #include "valvediag/data_error.hpp"
+#include "valvediag/html_report.hpp"
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/model_history.hpp"
 #include "valvediag/recorder.hpp"
 #include "valvediag/site_config.hpp"
 #include "valvediag/sweep_report.hpp"
@@ -81,6 +83,7 @@ struct LoopJob {
 
 struct SweepArgs {
   std::string config, db, loops, window = "4h", record, shard, json, csv, html, loop_timeout = "5m";
+  std::string reports;  // a folder for each loop's HTML report
   std::vector<std::string> files;
   DataOptions layout;  // CSV layout for data files
   int jobs = 0;
@@ -140,7 +143,33 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
     x.severity = severity(x);
     return assessment_json(x).dump();
   }
-  return assessment_json(assess_loop(d, job.name, opt)).dump();
+  Diagnosis dg;
+  LoopAssessment r = assess_loop(d, job.name, opt, &dg);
+  if (!a.reports.empty() && !dg.steps.empty()) {
+    // The loop's page: the climbed ladder's top model, where it fails, the findings.
+    const fs::path path = fs::path(a.reports) / (job.name + ".html");
+    std::vector<HistoryEntry> ladder;
+    for (const auto& s : dg.steps) ladder.push_back(history_entry(s.fit, "sweep"));
+    ReportContent c;
+    c.data = &d;
+    c.data_name = job.file.empty() ? a.db + ", loop " + job.name : job.file;
+    c.fit = &dg.last().fit;
+    c.where = &dg.last().residual;
+    c.diagnosis = &dg;
+    c.diagnosis_command = "valvediag sweep (diagnose --auto from linear)";
+    c.ladder = ladder;
+    c.notes = notes;
+    c.generator = "valvediag sweep";
+    ReportOptions ro;
+    ro.require_plots = false;  // without gnuplot the page says so in place of each plot
+    try {
+      write_report_file(path.string(), c, ro);
+      r.report = path.string();
+    } catch (const std::exception& e) {
+      r.error = std::string("report not written: ") + e.what();
+    }
+  }
+  return assessment_json(r).dump();
 }
 
 void write_file(const std::string& path, const std::string& text) {
@@ -163,7 +192,13 @@ void write_outputs(const SweepArgs& a, const SweepInfo& info,
     std::cout << "wrote " << a.csv << "\n";
   }
   if (!a.html.empty()) {
-    write_file(a.html, sweep_html(info, loops, {}));
+    // Links relative to the summary's folder, so the folder can be copied or served as a whole.
+    std::vector<std::string> links;
+    const fs::path base = fs::absolute(a.html).parent_path();
+    for (const auto& l : loops)
+      links.push_back(l.report.empty() ? ""
+                                       : fs::absolute(l.report).lexically_relative(base).string());
+    write_file(a.html, sweep_html(info, loops, links));
     std::cout << "wrote " << a.html << "\n";
   }
 }
@@ -224,6 +259,8 @@ void add_sweep(CLI::App& app, int& exit_code) {
   cmd->add_option("--json", a->json, "write the results file (sweep-merge reads it)");
   cmd->add_option("--csv", a->csv, "write the ranked summary as CSV");
   cmd->add_option("--html", a->html, "write the ranked summary as HTML");
+  cmd->add_option("--reports", a->reports,
+                  "write each loop's HTML report into this folder (linked from --html)");
   cmd->add_flag("--quiet", a->quiet, "no line per finished loop");
   add_layout_options(cmd, a->layout);
   cmd->callback([a, &exit_code] {
@@ -235,6 +272,13 @@ void add_sweep(CLI::App& app, int& exit_code) {
     const double window_s = duration_option("--window", a->window);
     const double timeout_s = duration_option("--loop-timeout", a->loop_timeout);
     if (a->jobs < 0) throw UsageError("--jobs must be 0 (one per core) or more");
+    if (!a->reports.empty()) {
+      std::error_code ec;
+      fs::create_directories(a->reports, ec);
+      if (ec || !fs::is_directory(a->reports))
+        throw UsageError("--reports " + a->reports + ": cannot create the folder" +
+                         (ec ? ": " + ec.message() : ""));
+    }
     std::pair<int, int> shard{0, 1};
     if (!a->shard.empty()) shard = parse_shard(a->shard);
 

@@ -102,6 +102,7 @@ json assessment_json(const LoopAssessment& a) {
                  {"op_span_percent", number(h.op_span_percent)}};
   j["elapsed_s"] = a.elapsed_s;
   j["error"] = a.error;
+  j["report"] = a.report;
   return j;
 }
 
@@ -142,6 +143,7 @@ LoopAssessment assessment_from_json(const json& j) {
   }
   a.elapsed_s = number_of(j, "elapsed_s");
   a.error = text_of(j, "error");
+  a.report = text_of(j, "report");
   return a;
 }
 

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "valvediag/stiction_quantification.hpp"
 #include "valvediag/verdict.hpp"
 
 namespace valvediag {
@@ -17,9 +18,21 @@ double param(const std::vector<NamedValue>& p, const char* name) {
   return LoopAssessment::kNaN;
 }
 
-// The friction figures of the fitted valve, in OP units: He (fs, fd), Kano (S, J),
-// Stenman (d: band, jump d), deadband (d, no jump).
-void stiction_size(const ModelFit& fit, double width, LoopAssessment& a) {
+// The friction figures of the fitted valve, in OP units: He (fs, fs - fd), Kano (S, J),
+// Stenman (d: band, jump d), deadband (d, no jump); a Preisach valve through He's figures fitted
+// to its response on the data's own OP (stiction_quantification.hpp).
+void stiction_size(const ModelFit& fit, const std::vector<double>& op, double width,
+                   LoopAssessment& a) {
+  if (fit.preisach) {
+    const StictionQuantification q = quantify_stiction(*fit.preisach, op);
+    if (q.valid && q.stiction) {
+      a.stiction_percent = q.overall.fs_percent * 100.0 / width;
+      a.slip_jump_percent = q.overall.jump_percent * 100.0 / width;
+    } else if (q.valid) {
+      a.stiction_percent = 0.0;
+      a.slip_jump_percent = 0.0;
+    }
+  }
   for (const auto& e : fit.effects) {
     double band = LoopAssessment::kNaN, jump = LoopAssessment::kNaN;
     if (e.name == "stiction") {
@@ -75,7 +88,8 @@ void rank(std::vector<LoopAssessment>& loops) {
   });
 }
 
-LoopAssessment assess_loop(const LoopData& d, const std::string& name, const AssessOptions& opt) {
+LoopAssessment assess_loop(const LoopData& d, const std::string& name, const AssessOptions& opt,
+                           Diagnosis* diagnosis) {
   const auto t0 = std::chrono::steady_clock::now();
   LoopAssessment a;
   a.loop = name;
@@ -114,8 +128,9 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
     a.first_missing = dg.steps.front().findings.front().effect;
   }
-  stiction_size(best, std::max(opt.range.hi - opt.range.lo, 1e-12), a);
+  stiction_size(best, d.op, std::max(opt.range.hi - opt.range.lo, 1e-12), a);
   a.reason = dg.conclusion;
+  if (diagnosis) *diagnosis = std::move(dg);
   return finish();
 }
 
