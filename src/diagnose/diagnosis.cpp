@@ -291,23 +291,26 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   }
   // Scores saturate when the model leaves much to explain; among near-equal scores the larger
   // gain on both parts of the record ranks first.
-  // A trial that explains clearly more (by a fifth of the larger gain) ranks first whatever the
-  // residual tests say: they are hints, the trial fit is the measurement.
+  // A trial that explains clearly more (a fifth of the error the other trial leaves) ranks first
+  // whatever the residual tests say: they are hints, the trial fit is the measurement.
   // Between comparable gains, an effect with several times fewer free parameters ranks first (a
   // Preisach plane or a load curve can imitate a two-parameter valve, not the other way round);
-  // then the score (gain and residual evidence).
+  // then the score (gain and residual evidence); between equal scores, fewer parameters.
   const double margin = opt.min_gain_percent;
   std::map<std::string, double> size;
   for (std::size_t i = 0; i < fits.size(); ++i) size[names[i]] = effect_size(names[i], fits[i], Ts);
   std::stable_sort(step.findings.begin(), step.findings.end(),
-                   [margin, &size](const Finding& a, const Finding& b) {
+                   [margin, base_est, &size](const Finding& a, const Finding& b) {
                      const double hi = std::max(a.gain_percent, b.gain_percent);
-                     if (hi >= margin && std::abs(a.gain_percent - b.gain_percent) > 0.2 * hi)
+                     const double lo = std::min(a.gain_percent, b.gain_percent);
+                     const double left = std::max(100.0 - base_est - lo, 0.0);
+                     if (hi >= margin && hi - lo > 0.2 * left)
                        return a.gain_percent > b.gain_percent;
                      const double sa = size[a.effect], sb = size[b.effect];
                      if (hi >= margin && (sa + 1) >= 3 * (sb + 1)) return false;
                      if (hi >= margin && (sb + 1) >= 3 * (sa + 1)) return true;
                      if (std::abs(a.score - b.score) > 0.02) return a.score > b.score;
+                     if (hi >= margin && sa != sb) return sa < sb;
                      return a.gain_percent > b.gain_percent;
                    });
   // Two effects that the data cannot tell apart: say so rather than pretend. They are when their
@@ -322,11 +325,20 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (names[i] == a.effect) fa = &fits[i];
       if (names[i] == b.effect) fb = &fits[i];
     }
+    // An actuator lag and a process lag commute when no valve nonlinearity sits between them:
+    // on such a model no data can tell them apart.
+    bool nonlinear_valve = false;
+    for (const auto& e : model.effects)
+      nonlinear_valve = nonlinear_valve || (find_effect(e.name)->stage == EffectStage::Valve &&
+                                            e.name != "actuator-lag");
+    const bool commuting_lags =
+        !nonlinear_valve && ((a.effect == "actuator-lag" && b.effect == "order") ||
+                             (a.effect == "order" && b.effect == "actuator-lag"));
     if (fa && fb && a.gain_percent >= opt.min_gain_percent &&
         b.gain_percent >= opt.min_gain_percent &&
         std::abs(a.gain_percent - b.gain_percent) <=
             std::max(1.0, 0.25 * std::max(a.gain_percent, b.gain_percent)) &&
-        same_prediction(y, *fa, *fb)) {
+        (commuting_lags || same_prediction(y, *fa, *fb))) {
       a.indistinguishable_from = b.effect;
       b.indistinguishable_from = a.effect;
     }

@@ -52,9 +52,7 @@ std::vector<Case> cases() {
       {"deadband (d 4)", "deadband", 1, [] { return named("deadband"); }},
       {"deadband (d 6)", "deadband", 2, [] { return with_valve("deadband", Deadband(6)); }},
       {"asymmetric stiction", "preisach", 1, [] { return named("asymmetric-stiction"); },
-       "stiction",
-       "a slow load curve (17 knots) absorbs the level-dependent error about as well as the "
-       "Preisach plane (47 weights) and the residual tests favour it"},
+       "stiction"},
       {"asymmetric stiction", "preisach", 2, [] { return named("asymmetric-stiction"); },
        "stiction"},
       {"saturation (5-70 %)", "saturation", 1, [] { return named("saturation"); }},
@@ -84,8 +82,8 @@ std::vector<Case> cases() {
          return s;
        }},
       {"level (K 0.01 /s)", "integrator", 1, [] { return named("level"); }, "",
-       "the level waves are a real load; in this record they explain more than the integrator, "
-       "whose gain stays under the 2-point threshold"},
+       "named first, but the level waves (a real load) hide most of the ramp in this record: the "
+       "gain on estimation data stays under the 2-point threshold of a supported finding"},
       {"level (K 0.02 /s)", "integrator", 2,
        [] {
          Scenario s = named("level");
@@ -196,7 +194,7 @@ TEST_CASE("hidden effects are named first, with a clear gain and overlapping int
       "known confusions %d; mean gain of adding it: %+.2f points validation fitness, %+.2f on "
       "both parts (the smaller of estimation and validation)\n",
       hits, all.size(), flagged_second, known, sum_val / n, sum_gain / n);
-  CHECK(known <= 2);
+  CHECK(known <= 1);
   CHECK(confusion.size() == 10);  // every effect of the vocabulary is hidden at least once
 }
 
