@@ -1,9 +1,11 @@
 #include "valvediag/html_report.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <complex>
+#include <cstdint>
 #include <cstdio>
 #include <future>
 #include <numbers>
@@ -287,6 +289,10 @@ std::string dnum(double v) {
 
 std::string e(std::string_view s) {
   return html_escape(s);
+}
+
+std::string pct(double v) {
+  return std::isfinite(v) ? num(v) + " %" : "n/a";
 }
 
 double t_at(const std::vector<double>& t, std::size_t k) {
@@ -800,8 +806,8 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
     o << "<p>Ladder climbed:</p>\n<ol>\n";
     for (std::size_t i = 0; i < d.steps.size(); ++i) {
       const auto& f = d.steps[i].fit;
-      o << "<li><code>" << e(to_string(f.spec)) << "</code>: " << e(num(f.fitness_percent))
-        << " % estimation, " << e(num(f.validation_fitness_percent)) << " % validation";
+      o << "<li><code>" << e(to_string(f.spec)) << "</code>: " << e(pct(f.fitness_percent))
+        << " estimation, " << e(pct(f.validation_fitness_percent)) << " validation";
       if (i > 0)
         o << " ("
           << e(signed_num(f.validation_fitness_percent -
@@ -878,11 +884,11 @@ void ladder_section(std::ostringstream& o, const ReportContent& c) {
                    : signed_num(h.fitness_percent - p.fitness_percent) + " estimation";
     }
     o << "<tr><td class=\"num\">" << i + 1 << "</td><td><code>" << e(h.model)
-      << "</code></td><td class=\"num\">" << e(num(h.fitness_percent))
-      << " %</td><td class=\"num\">" << e(num(h.validation_fitness_percent))
-      << " %</td><td class=\"num\">" << e(change) << "</td><td>(" << h.na << ", " << h.nb << ", "
-      << h.nk << ")</td><td>" << e(params_text(h.parameters)) << "</td><td>" << e(h.command)
-      << "</td><td>" << e(h.time) << "</td></tr>\n";
+      << "</code></td><td class=\"num\">" << e(pct(h.fitness_percent)) << "</td><td class=\"num\">"
+      << e(pct(h.validation_fitness_percent)) << "</td><td class=\"num\">" << e(change)
+      << "</td><td>(" << h.na << ", " << h.nb << ", " << h.nk << ")</td><td>"
+      << e(params_text(h.parameters)) << "</td><td>" << e(h.command) << "</td><td>" << e(h.time)
+      << "</td></tr>\n";
   }
   o << "</table>\n</section>\n";
 }

@@ -2,6 +2,7 @@
 // sticky loop.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <string>
