@@ -170,8 +170,11 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   step.fit = fit_model(u, y, Ts, model, fo);
   ResidualAnalysisOptions ro;
   ro.model_delay = static_cast<std::size_t>(std::max(0, step.fit.structure.nk + 1));
-  step.residual =
-      analyse_residual(u, y, step.fit.y_sim, step.fit.first_sample, step.fit.estimation_end, ro);
+  // A model with no stable linear part has no simulated output: nothing to analyse, but the
+  // trial fits below can still find the effect that makes the loop fit.
+  if (step.fit.y_sim.size() == y.size())
+    step.residual =
+        analyse_residual(u, y, step.fit.y_sim, step.fit.first_sample, step.fit.estimation_end, ro);
 
   std::vector<ModelSpec> trials;
   std::vector<std::string> names;
