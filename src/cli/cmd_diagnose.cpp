@@ -94,15 +94,19 @@ void add_ladder(CLI::App& app, int& exit_code) {
   auto a = std::make_shared<Args>();
   cmd->add_option("data", a->data, "the data file whose history to show");
   cmd->add_option("--db", a->db, "a recording: show the history of --loop in it");
-  cmd->add_option("--loop", a->loop, "the recorded loop (with --db)");
+  cmd->add_option("--loop", a->loop, "the recorded loop (with --db), or the loop in a .mat file");
   cmd->callback([a, &exit_code] {
     if (a->data.empty() == a->db.empty())
       throw UsageError("give a data file or --db site.sqlite --loop NAME (one of them)");
     if (!a->db.empty() && a->loop.empty()) throw UsageError("--db needs --loop NAME");
-    const std::string name = a->db.empty() ? a->data : a->db + "." + a->loop;
+    // The names data_name() gives: the file, FILE.mat.PATH, or site.sqlite.LOOP.
+    const std::string name = a->db.empty() ? (a->loop.empty() ? a->data : a->data + "." + a->loop)
+                                           : a->db + "." + a->loop;
     const std::string path = history_path_for(name);
     const auto entries = load_history(path);
-    const std::string source = a->db.empty() ? a->data : "--db " + a->db + " --loop " + a->loop;
+    const std::string source = a->db.empty()
+                                   ? a->data + (a->loop.empty() ? "" : " --loop " + a->loop)
+                                   : "--db " + a->db + " --loop " + a->loop;
     if (entries.empty())
       throw UsageError("no model history for " + name + " (" + path +
                        "): run 'valvediag diagnose " + source + " --auto' or 'valvediag fit " +

@@ -21,7 +21,7 @@ using namespace valvediag;
 namespace fs = std::filesystem;
 
 TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean one is not") {
-  const LoopData sticky = run_scenario(scenario_by_name("paper-ex1"), 1, 1500);
+  const LoopData sticky = run_scenario(scenario_by_name("paper-ex1"), 1, 3000);
   const LoopAssessment s = assess_loop(sticky, "FIC101");
   INFO(s.reason);
   CHECK(s.verdict == "stiction");
@@ -33,7 +33,7 @@ TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean 
   CHECK(s.severity >= 6.0);
   CHECK(s.health.op_reversals_per_hour > 0);
 
-  const LoopData clean = run_scenario(scenario_by_name("linear-clean"), 1, 1500);
+  const LoopData clean = run_scenario(scenario_by_name("linear-clean"), 1, 3000);
   const LoopAssessment c = assess_loop(clean, "FIC102");
   INFO(c.reason);
   CHECK(c.verdict == "no-valve-problem");

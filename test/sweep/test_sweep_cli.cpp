@@ -62,7 +62,7 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
   const std::string db = fresh("sweep.sqlite");
   const std::string json = (kTmp / "sweep.json").string(), csv = (kTmp / "sweep.csv").string(),
                     html = (kTmp / "sweep.html").string();
-  auto r = run({"sweep", "--config", site, "--db", db, "--record", "8s", "--window", "1h", "--json",
+  auto r = run({"sweep", "--config", site, "--db", db, "--record", "30s", "--window", "1h", "--json",
                 json, "--csv", csv, "--html", html});
   INFO(r.out);
   CHECK(r.status == 0);  // findings and a dead loop are results
@@ -100,10 +100,10 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
 TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shards merge back") {
   const std::string sticky = (kTmp / "sticky.csv").string(), clean = (kTmp / "clean.csv").string(),
                     bad = (kTmp / "bad.csv").string(), tiny = (kTmp / "tiny.csv").string();
-  REQUIRE(run({"simulate", "--scenario", "paper-ex1", "--seed", "2", "--samples", "1500", "--out",
+  REQUIRE(run({"simulate", "--scenario", "paper-ex1", "--seed", "2", "--samples", "3000", "--out",
                sticky})
               .status == 0);
-  REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "2", "--samples", "1500",
+  REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "2", "--samples", "3000",
                "--out", clean})
               .status == 0);
   REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "3", "--samples", "120", "--out",
