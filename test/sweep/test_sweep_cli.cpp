@@ -41,9 +41,10 @@ const nlohmann::json* loop_in(const nlohmann::json& j, const std::string& name) 
 }  // namespace
 
 TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend; nothing written") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{100.0, 0});
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{50.0, 0});
   plc.start();
-  // FIC101 (paper Example 1, sticky) at 100x: 5 ms ticks; DEAD201 on a bus nobody serves.
+  // FIC101 (paper Example 1, sticky) at 50x: 10 ms ticks, about 3500 in 36 s (fewer samples
+  // leave the diagnosis too little to tell stiction from a slow load); DEAD201: nobody serves it.
   const std::string site = (kTmp / "sweep-site.toml").string();
   {
     std::ofstream f(site);
@@ -51,7 +52,7 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
       << plc.port() << "\"\ntimeout = \"100ms\"\nretries = 0\nreconnect_max = \"500ms\"\n"
       << "[[bus]]\nname = \"gone\"\nprotocol = \"modbus-tcp\"\ncontroller = "
          "\"tcp://127.0.0.1:1\"\ntimeout = \"50ms\"\nretries = 0\nreconnect_max = \"500ms\"\n"
-      << "[[loop]]\nname = \"FIC101\"\nbus = \"plc\"\nsample_period = 0.005\n"
+      << "[[loop]]\nname = \"FIC101\"\nbus = \"plc\"\nsample_period = 0.01\n"
       << "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
       << "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\n"
       << "sp = { register = \"holding\", address = 4, type = \"FLOAT32\" }\n"
@@ -62,8 +63,8 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
   const std::string db = fresh("sweep.sqlite");
   const std::string json = (kTmp / "sweep.json").string(), csv = (kTmp / "sweep.csv").string(),
                     html = (kTmp / "sweep.html").string();
-  auto r = run({"sweep", "--config", site, "--db", db, "--record", "30s", "--window", "1h", "--json",
-                json, "--csv", csv, "--html", html});
+  auto r = run({"sweep", "--config", site, "--db", db, "--record", "36s", "--window", "1h",
+                "--json", json, "--csv", csv, "--html", html});
   INFO(r.out);
   CHECK(r.status == 0);  // findings and a dead loop are results
   CHECK(plc.write_requests() == 0);
