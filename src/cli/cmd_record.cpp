@@ -11,8 +11,6 @@
 
 namespace valvediag::cli {
 
-namespace {
-
 std::vector<std::string> split_names(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -21,6 +19,8 @@ std::vector<std::string> split_names(const std::string& s) {
     if (!item.empty()) out.push_back(item);
   return out;
 }
+
+namespace {
 
 std::string ms(double s) {
   char b[32];

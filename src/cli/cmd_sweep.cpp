@@ -4,12 +4,10 @@
 // with a time limit, so one bad loop never stops the sweep.
 #include <algorithm>
 #include <cmath>
-#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <set>
-#include <sstream>
 #include <thread>
 
 #include "commands.hpp"
@@ -32,24 +30,6 @@ namespace valvediag::cli {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string utc_now() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char b[32];
-  std::strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return b;
-}
-
-std::vector<std::string> split_names(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ','))
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
 
 double duration_option(const std::string& opt, const std::string& v) {
   const auto d = parse_duration(v);
@@ -324,7 +304,7 @@ void add_sweep(CLI::App& app, int& exit_code) {
     }
 
     SweepInfo info;
-    info.started_utc = utc_now();
+    info.started_utc = utc_timestamp();
     info.source = site_mode ? a->config + " / " + a->db : std::to_string(jobs.size()) + " files";
     info.shard = a->shard;
     info.window_s = site_mode ? window_s : 0.0;
@@ -375,7 +355,7 @@ void add_sweep(CLI::App& app, int& exit_code) {
           results.push_back(std::move(r));
         },
         &stop);
-    info.finished_utc = utc_now();
+    info.finished_utc = utc_timestamp();
     info.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const bool complete = results.size() == jobs.size();
     if (store) store->end_sweep(sweep_id, info, complete ? "done" : "stopped");

@@ -43,6 +43,8 @@ void add_trend(CLI::App& app, int& exit_code);
 // unknown names are UsageErrors (exit status 2).
 RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const std::string& from,
                           const std::string& to, std::int64_t run = 0);
+// "A,B,,C" -> {A, B, C}: the --loops lists of record and sweep.
+std::vector<std::string> split_names(const std::string& s);
 // The recorder's end-of-run summary (record and demo).
 std::string recorder_summary(const RecorderStatus& s, const std::string& db, std::int64_t run);
 

@@ -6,6 +6,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "valvediag/html_report.hpp"
+
 namespace valvediag {
 
 namespace {
@@ -31,32 +33,6 @@ std::string fmt(double v, int prec = 1) {
   char b[32];
   std::snprintf(b, sizeof b, "%.*f", prec, v);
   return b;
-}
-
-std::string html_escape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    switch (c) {
-      case '&':
-        o += "&amp;";
-        break;
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      case '\'':
-        o += "&#39;";
-        break;
-      default:
-        o += c;
-    }
-  }
-  return o;
 }
 
 std::string csv_field(const std::string& s) {
