@@ -1,3 +1,5 @@
+#include <cmath>
+#include <cstdio>
 #include <iostream>
 
 #include "commands.hpp"
@@ -5,6 +7,7 @@
 #include "fit_runner.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
+#include "valvediag/loop_assessment.hpp"
 
 namespace valvediag::cli {
 
@@ -65,8 +68,19 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     const Diagnosis r =
         a->autoclimb ? diagnose_auto(d.op, d.pv, Ts, spec, o) : diagnose(d.op, d.pv, Ts, spec, o);
     std::cout << format_diagnosis(r, d.t);
+    // The stiction size the sweep reports, for one loop without a site config.
+    const FrictionSize fr = friction_size(r.last().fit, d.op);
+    if (std::isfinite(fr.band_percent))
+      std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%\n",
+                  fr.band_percent, fr.jump_percent);
     if (!a->json.empty()) {
-      write_text(a->json, diagnosis_json(r, d.t).dump(2) + "\n");
+      nlohmann::json j = diagnosis_json(r, d.t);
+      auto number = [](double v) {
+        return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+      };
+      j["stiction_percent"] = number(fr.band_percent);
+      j["slip_jump_percent"] = number(fr.jump_percent);
+      write_text(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }
     if (!a->no_history) {

@@ -18,19 +18,23 @@ double param(const std::vector<NamedValue>& p, const char* name) {
   return LoopAssessment::kNaN;
 }
 
+}  // namespace
+
 // The friction figures of the fitted valve, in OP units: He (fs, fs - fd), Kano (S, J),
 // Stenman (d: band, jump d), deadband (d, no jump); a Preisach valve through He's figures fitted
 // to its response on the data's own OP (stiction_quantification.hpp).
-void stiction_size(const ModelFit& fit, const std::vector<double>& op, double width,
-                   LoopAssessment& a) {
+FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
+                           const OpRange& range) {
+  const double width = std::max(range.hi - range.lo, 1e-12);
+  FrictionSize a;
   if (fit.preisach) {
     const StictionQuantification q = quantify_stiction(*fit.preisach, op);
     if (q.valid && q.stiction) {
-      a.stiction_percent = q.overall.fs_percent * 100.0 / width;
-      a.slip_jump_percent = q.overall.jump_percent * 100.0 / width;
+      a.band_percent = q.overall.fs_percent * 100.0 / width;
+      a.jump_percent = q.overall.jump_percent * 100.0 / width;
     } else if (q.valid) {
-      a.stiction_percent = 0.0;
-      a.slip_jump_percent = 0.0;
+      a.band_percent = 0.0;
+      a.jump_percent = 0.0;
     }
   }
   for (const auto& e : fit.effects) {
@@ -45,18 +49,17 @@ void stiction_size(const ModelFit& fit, const std::vector<double>& op, double wi
       } else {
         band = jump = param(e.parameters, "d");
       }
-    } else if (e.name == "deadband" && std::isnan(a.stiction_percent)) {
+    } else if (e.name == "deadband" && std::isnan(a.band_percent)) {
       band = param(e.parameters, "d");
       jump = 0.0;
     } else {
       continue;
     }
-    a.stiction_percent = 100.0 * band / width;
-    a.slip_jump_percent = 100.0 * jump / width;
+    a.band_percent = 100.0 * band / width;
+    a.jump_percent = 100.0 * jump / width;
   }
+  return a;
 }
-
-}  // namespace
 
 double severity(const LoopAssessment& a) {
   double s = 0.0;
@@ -128,7 +131,9 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
     a.first_missing = dg.steps.front().findings.front().effect;
   }
-  stiction_size(best, d.op, std::max(opt.range.hi - opt.range.lo, 1e-12), a);
+  const FrictionSize fr = friction_size(best, d.op, opt.range);
+  a.stiction_percent = fr.band_percent;
+  a.slip_jump_percent = fr.jump_percent;
   a.reason = dg.conclusion;
   if (diagnosis) *diagnosis = std::move(dg);
   return finish();

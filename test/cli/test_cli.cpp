@@ -194,6 +194,10 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   CHECK(j["model"] == "stiction");
   CHECK(j["verdict"] == "stiction");
   CHECK(j["stiction"]["fs_percent"].get<double>() == doctest::Approx(8.4).epsilon(0.2));
+  // The sweep's stiction size, for one loop: He's fs in % of travel, and the slip jump fs - fd.
+  CHECK(j["stiction_percent"].get<double>() == doctest::Approx(8.4).epsilon(0.2));
+  CHECK(j["slip_jump_percent"].get<double>() == doctest::Approx(8.4 - 3.52).epsilon(0.3));
+  CHECK(r.out.find("stiction:  8.") != std::string::npos);
   REQUIRE(!j["findings"].empty());
   for (const auto& x : j["findings"])
     for (const char* k : {"effect", "score", "validation_gain_percent", "where", "explanation"})
