@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "number_format.hpp"
 #include "valvediag/verdict.hpp"
 
 namespace valvediag {
@@ -11,17 +12,10 @@ namespace valvediag {
 namespace {
 
 std::string num(double v, int prec = 2) {
-  if (!std::isfinite(v)) return "n/a";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", prec, v);
-  return buf;
+  return report_format::fixed(v, prec);
 }
-
 std::string signed_num(double v) {
-  if (!std::isfinite(v)) return "n/a";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%+.2f", v);
-  return buf;
+  return report_format::signed_fixed(v);
 }
 
 double t_at(const std::vector<double>& t, std::size_t k) {

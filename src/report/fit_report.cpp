@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include "number_format.hpp"
+
 namespace valvediag {
 
 const char* method_name(FitMethod m) {
@@ -33,10 +35,7 @@ ResidualAnalysis analyse_fit(const IdentificationResult& r, const std::vector<do
 namespace {
 
 std::string num(double v, int prec = 4) {
-  if (!std::isfinite(v)) return "n/a";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", prec, v);
-  return buf;
+  return report_format::fixed(v, prec);
 }
 
 std::string polynomial(const std::vector<double>& coef, int first_power, bool leading_one) {

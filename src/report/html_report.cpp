@@ -12,6 +12,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "number_format.hpp"
 #include "valvediag/fit_report.hpp"
 #include "valvediag/verdict.hpp"
 
@@ -266,17 +267,10 @@ ModelFit model_fit_of(const IdentificationResult& r, const std::vector<double>& 
 namespace {
 
 std::string num(double v, int prec = 2) {
-  if (!std::isfinite(v)) return "n/a";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", prec, v);
-  return buf;
+  return report_format::fixed(v, prec);
 }
-
 std::string signed_num(double v, int prec = 2) {
-  if (!std::isfinite(v)) return "n/a";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%+.*f", prec, v);
-  return buf;
+  return report_format::signed_fixed(v, prec);
 }
 
 // Numbers in gnuplot data blocks: short, '?' (missing) for NaN and infinities.

@@ -6,6 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "number_format.hpp"
 #include "valvediag/html_report.hpp"
 
 namespace valvediag {
@@ -29,10 +30,7 @@ std::string text_of(const json& j, const char* key) {
 }
 
 std::string fmt(double v, int prec = 1) {
-  if (!std::isfinite(v)) return "-";
-  char b[32];
-  std::snprintf(b, sizeof b, "%.*f", prec, v);
-  return b;
+  return report_format::fixed(v, prec, "-");
 }
 
 std::string csv_field(const std::string& s) {
