@@ -6,6 +6,7 @@
 #include <toml++/toml.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -35,13 +36,19 @@ std::string to_string(PointName p) {
   return names[static_cast<std::size_t>(p)];
 }
 std::string to_string(FaultKind k) {
-  static const char* const names[] = {"delay", "timeout", "exception", "drop", "restart", "garble"};
+  static const char* const names[] = {"delay",   "timeout", "exception", "drop",
+                                      "restart", "garble",  "freeze"};
   return names[static_cast<std::size_t>(k)];
 }
 std::optional<FaultKind> parse_fault_kind(std::string_view s) {
-  for (int i = 0; i <= static_cast<int>(FaultKind::garble); ++i)
+  for (int i = 0; i <= static_cast<int>(FaultKind::freeze); ++i)
     if (to_string(static_cast<FaultKind>(i)) == s) return static_cast<FaultKind>(i);
   return std::nullopt;
+}
+
+std::string can_unix_path(const BusConfig& bus) {
+  if (bus.kind != BusKind::socketcan || bus.interface.rfind("unix:", 0) != 0) return "";
+  return bus.interface.substr(5);
 }
 
 const BusConfig* SiteConfig::find_bus(std::string_view name) const {
@@ -118,6 +125,12 @@ const char* kind_of(const toml::node& n) {
     default:
       return "a date/time";
   }
+}
+
+std::string seconds_text(double s) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g s", s);
+  return b;
 }
 
 class Table {
@@ -216,6 +229,18 @@ class Table {
                     std::to_string(hi) + " s");
     return *v;
   }
+  // stale_after: a duration longer than `period_s`, or "off" (0).
+  double stale_after(double def, double period_s) const {
+    const toml::node* n = t_.get("stale_after");
+    if (!n) return def;
+    if (n->is_string() && n->as_string()->get() == "off") return 0.0;
+    const double v = duration("stale_after", 0.0, 0.0, 1e7);
+    if (!(v > period_s))
+      fail("stale_after", "must be longer than the sample period (" + seconds_text(period_s) +
+                              "), else a value read twice in a row is flagged; give e.g. "
+                              "\"30s\", or \"off\"");
+    return v;
+  }
   const toml::node* get(std::string_view key) const { return t_.get(key); }
 
  private:
@@ -309,13 +334,27 @@ BusConfig read_bus(const Table& t, const std::string& base_dir) {
     b.reconnect_max_s = t.duration("reconnect_max", 1.0, 0.01, 600.0);
   } else {
     b.interface = t.string("interface", "", true);
+    if (b.interface.rfind("unix:", 0) == 0) {
+      // The simulated PLC's frame socket: a path, relative to this file like dbc.
+      const std::string path = resolve(base_dir, b.interface.substr(5));
+      if (path.empty())
+        t.fail("interface", "no socket path in 'unix:'; write interface = \"unix:/tmp/can0.sock\"");
+      if (path.size() > 107)  // sockaddr_un::sun_path holds 108 bytes with the terminator
+        t.fail("interface", "socket path '" + path + "' is " + std::to_string(path.size()) +
+                                " bytes; a Unix socket path has at most 107: choose a shorter one");
+      b.interface = "unix:" + path;
+    } else if (b.interface.empty() || b.interface.size() > 15) {
+      t.fail("interface", "'" + b.interface +
+                              "' is not a CAN interface name (1..15 characters, e.g. \"can0\"), "
+                              "nor \"unix:PATH\" (the simulated PLC's socket)");
+    }
     b.dbc = resolve(base_dir, t.string("dbc", ""));
   }
   return b;
 }
 
 PointConfig read_modbus_point(const Table& t) {
-  t.allow_only({"register", "address", "type", "byte_order", "scale", "offset"});
+  t.allow_only({"register", "address", "type", "byte_order", "scale", "offset", "stale_after"});
   PointConfig p;
   p.present = true;
   p.line = t.line();
@@ -344,7 +383,7 @@ PointConfig read_modbus_point(const Table& t) {
 
 PointConfig read_can_point(const Table& t, const Dbc* dbc, const BusConfig& bus) {
   t.allow_only({"message", "signal", "frame_id", "extended", "start_bit", "length", "byte_order",
-                "signed", "factor", "offset"});
+                "signed", "factor", "offset", "stale_after"});
   PointConfig p;
   p.present = true;
   p.line = t.line();
@@ -386,7 +425,7 @@ LoopConfigEntry read_loop(const Table& t, const SiteConfig& site,
                           const std::vector<std::optional<Dbc>>& dbcs,
                           const std::string& base_dir) {
   t.allow_only({"name", "bus", "sample_period", "op_range", "op", "pv", "sp", "mv", "mode",
-                "simulate", "seed"});
+                "simulate", "seed", "stale_after"});
   LoopConfigEntry l;
   l.line = t.line();
   l.name = t.string("name", "", true);
@@ -413,6 +452,7 @@ LoopConfigEntry read_loop(const Table& t, const SiteConfig& site,
   if (!l.simulate.empty() && l.simulate.find(".toml") != std::string::npos)
     l.simulate = resolve(base_dir, l.simulate);
   l.seed = static_cast<std::uint64_t>(t.integer("seed", 1, 0, INT64_MAX));
+  l.stale_after_s = t.stale_after(0.0, l.sample_period_s);
   const std::size_t bus_index = static_cast<std::size_t>(bus - site.buses.data());
   for (std::size_t i = 0; i < kPointCount; ++i) {
     const std::string key = to_string(static_cast<PointName>(i));
@@ -430,6 +470,10 @@ LoopConfigEntry read_loop(const Table& t, const SiteConfig& site,
     l.points[i] = bus->kind == BusKind::socketcan
                       ? read_can_point(pt, dbcs[bus_index] ? &*dbcs[bus_index] : nullptr, *bus)
                       : read_modbus_point(pt);
+    // The loop's stale_after covers the values a running plant keeps moving (op, pv, mv); a set
+    // point or a mode is constant for hours on purpose, so it is checked only when asked for.
+    const bool moving = i <= 1 || static_cast<PointName>(i) == PointName::mv;
+    l.points[i].stale_after_s = pt.stale_after(moving ? l.stale_after_s : 0.0, l.sample_period_s);
   }
   // Overlapping registers are a typo (two values cannot share a register).
   if (bus->kind != BusKind::socketcan)
@@ -456,7 +500,8 @@ FaultConfig read_fault(const Table& t) {
   const std::string kind = t.string("kind", "", true);
   const auto k = parse_fault_kind(kind);
   if (!k)
-    t.fail("kind", "'" + kind + "' must be delay, timeout, exception, drop, restart or garble");
+    t.fail("kind",
+           "'" + kind + "' must be delay, timeout, exception, drop, restart, garble or freeze");
   f.kind = *k;
   if (t.has("address")) f.address = static_cast<int>(t.integer("address", 0, 0, 65535));
   if (t.has("register")) {

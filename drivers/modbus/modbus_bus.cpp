@@ -1,11 +1,15 @@
 #include "valvediag/modbus_bus.hpp"
 
 #include <modbus/modbus.h>
+#include <poll.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <stdexcept>
 #include <thread>
@@ -41,6 +45,17 @@ using Clock = std::chrono::steady_clock;
 
 enum class Failure { none, exception, timeout, garbled, link };
 
+Clock::duration seconds(double s) {
+  return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+}
+
+// When a point's raw registers last changed, for stale_after.
+struct RawHistory {
+  std::uint16_t regs[2] = {0, 0};
+  Clock::time_point since{};
+  bool seen = false;
+};
+
 Failure classify(int err) {
   if (err == ETIMEDOUT) return Failure::timeout;
   if (err == EMBBADDATA || err == EMBBADCRC || err == EMBBADEXC || err == EMBMDATA ||
@@ -61,6 +76,12 @@ struct ModbusBus::Impl {
   Backoff backoff;
   Clock::time_point next_attempt{};
   Clock::time_point last_request{};
+  // RTU: after a timeout or garbled reply, a late (rest of a) reply may still come. Modbus RTU
+  // has no transaction id, so it would be taken for the answer to the next request, perhaps of
+  // another loop with the same layout: until drain_until the line is read and discarded.
+  bool dirty = false;
+  Clock::time_point drain_until{};
+  std::vector<std::array<RawHistory, kPointCount>> history;  // per loop
   mutable std::mutex stats_mutex;
   BusStats st;
 
@@ -110,12 +131,17 @@ struct ModbusBus::Impl {
     const auto sec = static_cast<std::uint32_t>(cfg.timeout_s);
     const auto usec = static_cast<std::uint32_t>(std::lround((cfg.timeout_s - sec) * 1e6));
     modbus_set_response_timeout(ctx, sec, std::min<std::uint32_t>(usec, 999999));
+    // Between two bytes of one reply: a truncated reply fails within about one more timeout
+    // (libmodbus's default is 0.5 s whatever the response timeout).
+    const double byte_s = std::clamp(cfg.timeout_s, 0.05, 0.5);
+    modbus_set_byte_timeout(ctx, 0, static_cast<std::uint32_t>(std::lround(byte_s * 1e6)));
     if (modbus_connect(ctx) == -1) {
       const int err = errno;
       fail_connect("cannot connect to " + where() + ": " + modbus_strerror(err));
       return false;
     }
     connected = true;
+    dirty = false;
     backoff.reset();
     std::lock_guard lock(stats_mutex);
     st.connected = true;
@@ -134,9 +160,27 @@ struct ModbusBus::Impl {
 
   void pause() {
     if (cfg.pause_s <= 0) return;
-    const auto until = last_request + std::chrono::duration_cast<Clock::duration>(
-                                          std::chrono::duration<double>(cfg.pause_s));
-    std::this_thread::sleep_until(until);
+    std::this_thread::sleep_until(last_request + seconds(cfg.pause_s));
+  }
+
+  // RTU, before each request: discard a late reply still due (bounded by drain_until), then
+  // whatever else sits in the input buffer.
+  void clear_line() {
+    if (cfg.kind != BusKind::modbus_rtu) return;
+    if (dirty) {
+      const int fd = modbus_get_socket(ctx);
+      std::uint8_t junk[256];
+      for (auto now = Clock::now(); fd >= 0 && now < drain_until; now = Clock::now()) {
+        const auto left =
+            std::chrono::duration_cast<std::chrono::milliseconds>(drain_until - now).count() + 1;
+        pollfd p{fd, POLLIN, 0};
+        const int rc = ::poll(&p, 1, static_cast<int>(left));
+        if (rc < 0 && errno != EINTR) break;
+        if (rc > 0 && ::read(fd, junk, sizeof junk) <= 0) break;  // link trouble: the request says
+      }
+      dirty = false;
+    }
+    modbus_flush(ctx);
   }
 
   // Reads one block; "" on success, else the problem (counted).
@@ -148,6 +192,7 @@ struct ModbusBus::Impl {
         if (Clock::now() < next_attempt || !connect()) return st_last_error();
       }
       pause();
+      clear_line();
       int rc = b.reg == RegisterType::holding
                    ? modbus_read_registers(ctx, b.address, b.count, dest)
                    : modbus_read_input_registers(ctx, b.address, b.count, dest);
@@ -180,7 +225,8 @@ struct ModbusBus::Impl {
         close();
         next_attempt = Clock::now();
       } else {
-        modbus_flush(ctx);
+        dirty = true;
+        drain_until = Clock::now() + seconds(cfg.timeout_s);
       }
     }
     return problem;
@@ -200,6 +246,7 @@ ModbusBus::ModbusBus(BusConfig config, std::vector<LoopConfigEntry> loops)
   impl_->cfg = std::move(config);
   impl_->loops = std::move(loops);
   for (const auto& l : impl_->loops) impl_->plans.push_back(plan_requests(l));
+  impl_->history.resize(impl_->loops.size());
 }
 
 ModbusBus::~ModbusBus() = default;
@@ -237,6 +284,29 @@ LoopValues ModbusBus::read(std::size_t loop) {
       if (!std::isfinite(v) && out.error.empty())
         out.error = l.name + "." + to_string(static_cast<PointName>(i)) + ": the device sent " +
                     "a value that is not a number";
+      if (p.stale_after_s > 0) {
+        // Frozen registers: the PLC answers but no longer updates the value.
+        RawHistory& h = m.history[loop][i];
+        const auto now = Clock::now();
+        if (!h.seen || !std::equal(span.begin(), span.end(), h.regs)) {
+          std::copy(span.begin(), span.end(), h.regs);
+          h.since = now;
+          h.seen = true;
+        }
+        const double same_s = std::chrono::duration<double>(now - h.since).count();
+        if (same_s > p.stale_after_s && out.points[i].quality == Quality::good) {
+          out.points[i].quality = Quality::stale;
+          if (out.error.empty()) {
+            char b2[128];
+            std::snprintf(b2, sizeof b2, "unchanged for %.1f s (stale_after %g s)", same_s,
+                          p.stale_after_s);
+            out.error = l.name + "." + to_string(static_cast<PointName>(i)) + ": " +
+                        to_string(p.reg) + " register(s) " + std::to_string(p.address) + ".." +
+                        std::to_string(p.address + static_cast<int>(span.size()) - 1) + " " + b2 +
+                        "; the PLC may have stopped updating them";
+          }
+        }
+      }
     }
     if (!problem.empty() && out.error.empty()) out.error = problem;
   }

@@ -1,7 +1,9 @@
 // Modbus TCP and RTU on libmodbus. libmodbus's own link recovery is off (it can hang forever on a
-// dead link); this driver reconnects itself with backoff, and after a timeout or a garbled reply
-// it drops the connection, since a late reply would otherwise be taken for the next one.
-// Only function codes 3 and 4 are ever sent.
+// dead link); this driver reconnects itself with backoff. After a timeout or a garbled reply a
+// late reply would be taken for the next one: on TCP the connection is dropped; on RTU (no
+// connection to drop) the line is read and discarded for one more timeout before the next
+// request, and flushed before every request. Points with stale_after are flagged stale when
+// their raw registers stay bit-identical for longer. Only function codes 3 and 4 are ever sent.
 #pragma once
 
 #include <memory>

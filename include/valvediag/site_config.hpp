@@ -41,9 +41,12 @@ struct BusConfig {
   double pause_s = 0.0;          // pause between requests (slow serial gateways)
   double reconnect_max_s = 1.0;  // backoff cap between reconnection attempts
   // SocketCAN
-  std::string interface;  // can0
+  std::string interface;  // can0, or "unix:PATH": the simulated PLC's frame socket (a mock)
   std::string dbc;        // DBC file (resolved against the config's directory)
 };
+// The socket path of a socketcan bus whose interface is "unix:PATH" (resolved against the
+// config's directory); "" for a real CAN interface or a Modbus bus.
+std::string can_unix_path(const BusConfig& bus);
 
 enum class RegisterType : std::uint8_t { holding, input };
 std::string to_string(RegisterType r);
@@ -62,6 +65,9 @@ struct PointConfig {
   DataType type = DataType::float32;
   ByteOrder order = ByteOrder::abcd;
   double scale = 1.0, offset = 0.0;
+  // Flag the value stale when its raw value has not changed for longer than this (0: never).
+  // Set per point, or for op, pv and mv by the loop's stale_after.
+  double stale_after_s = 0.0;
   // CAN
   CanSignal can;
   std::string message, signal;  // DBC names, when taken from the DBC
@@ -73,6 +79,7 @@ struct LoopConfigEntry {
   int line = 0;
   double sample_period_s = 1.0;
   double op_min = 0.0, op_max = 100.0;  // range of OP in %
+  double stale_after_s = 0.0;           // the loop's stale_after (already applied to points)
   std::array<PointConfig, kPointCount> points;
   // Simulated PLC only: which simulated loop serves these registers.
   std::string simulate;  // scenario name, or a scenario TOML path (resolved like dbc)
@@ -82,8 +89,9 @@ struct LoopConfigEntry {
 
 // Fault injection for the simulated PLC (tests and demos): applies to requests that cover
 // `address` (any address when unset) during [start_s, start_s + duration_s), to every `every`-th
-// matching request.
-enum class FaultKind : std::uint8_t { delay, timeout, exception, drop, restart, garble };
+// matching request. `freeze` is not about requests: the registers of the points covering
+// `address` (all registers when unset) stop being updated, as when a PLC stops its program.
+enum class FaultKind : std::uint8_t { delay, timeout, exception, drop, restart, garble, freeze };
 std::string to_string(FaultKind k);
 std::optional<FaultKind> parse_fault_kind(std::string_view s);
 struct FaultConfig {

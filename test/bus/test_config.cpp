@@ -136,6 +136,79 @@ TEST_CASE("config errors name the line, the key and what to do") {
   CHECK(std::string(e.what()).find("no signal 'OUT'") != std::string::npos);
 }
 
+TEST_CASE(
+    "stale_after: per loop for op, pv and mv, per point for any, \"off\"; errors at their line") {
+  const std::string loop =
+      "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\nstale_after = \"30s\"\n"
+      "op = { address = 0, type = \"FLOAT32\" }\n"
+      "pv = { address = 2, type = \"FLOAT32\" }\n"
+      "sp = { address = 4, type = \"FLOAT32\" }\n"
+      "mv = { address = 6, type = \"FLOAT32\", stale_after = \"off\" }\n"
+      "mode = { address = 8, type = \"UINT16\", stale_after = \"2m\" }\n";
+  const SiteConfig s = parse_site_config(std::string(kBus) + loop, "t.toml");
+  const LoopConfigEntry& l = s.loops[0];
+  CHECK(l.stale_after_s == 30.0);
+  CHECK(l.point(PointName::op).stale_after_s == 30.0);
+  CHECK(l.point(PointName::pv).stale_after_s == 30.0);
+  CHECK(l.point(PointName::sp).stale_after_s == 0.0);  // a set point stays put on purpose
+  CHECK(l.point(PointName::mv).stale_after_s == 0.0);
+  CHECK(l.point(PointName::mode).stale_after_s == 120.0);
+  // Off by default.
+  const SiteConfig d = parse_site_config(
+      std::string(kBus) +
+          "[[loop]]\nname = \"A\"\nbus = \"p\"\nop = { address = 0, type = \"FLOAT32\" }\n"
+          "pv = { address = 2, type = \"FLOAT32\" }\n",
+      "t.toml");
+  CHECK(d.loops[0].point(PointName::pv).stale_after_s == 0.0);
+
+  auto e = error_of(std::string(kBus) +
+                    "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
+                    "stale_after = \"500ms\"\n"
+                    "op = { address = 0, type = \"FLOAT32\" }\n"
+                    "pv = { address = 2, type = \"FLOAT32\" }\n");
+  CHECK(e.line() == 9);
+  CHECK(e.key() == "loop[0].stale_after");
+  CHECK(std::string(e.what()).find("longer than the sample period (1 s)") != std::string::npos);
+  e = error_of(std::string(kBus) +
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+               "op = { address = 0, type = \"FLOAT32\" }\n"
+               "pv = { address = 2, type = \"FLOAT32\", stale_after = \"never\" }\n");
+  CHECK(e.line() == 9);
+  CHECK(e.key() == "loop[0].pv.stale_after");
+  CHECK(std::string(e.what()).find("must be a duration") != std::string::npos);
+}
+
+TEST_CASE("CAN interface \"unix:PATH\" (the simulated PLC's socket) and the freeze fault") {
+  const std::string loop =
+      "[[loop]]\nname = \"A\"\nbus = \"c\"\n"
+      "op = { frame_id = 0x100, start_bit = 0, length = 16 }\n"
+      "pv = { frame_id = 0x100, start_bit = 16, length = 16 }\n";
+  SiteConfig s = parse_site_config(
+      "[[bus]]\nname = \"c\"\nprotocol = \"socketcan\"\ninterface = \"unix:sock/can0\"\n" + loop,
+      "t.toml", "/srv/site");
+  CHECK(can_unix_path(s.buses[0]) == "/srv/site/sock/can0");  // relative to the file, like dbc
+  s = parse_site_config(
+      "[[bus]]\nname = \"c\"\nprotocol = \"socketcan\"\ninterface = \"can0\"\n" + loop, "t.toml");
+  CHECK(can_unix_path(s.buses[0]) == "");
+  auto e = error_of("[[bus]]\nname = \"c\"\nprotocol = \"socketcan\"\ninterface = \"unix:/" +
+                    std::string(120, 'x') + "\"\n" + loop);
+  CHECK(e.line() == 4);
+  CHECK(std::string(e.what()).find("at most 107") != std::string::npos);
+  e = error_of("[[bus]]\nname = \"c\"\nprotocol = \"socketcan\"\ninterface = \"unix:\"\n" + loop);
+  CHECK(std::string(e.what()).find("no socket path") != std::string::npos);
+
+  s = parse_site_config(std::string(kBus) +
+                            "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+                            "op = { address = 0, type = \"FLOAT32\" }\n"
+                            "pv = { address = 2, type = \"FLOAT32\" }\n"
+                            "[[fault]]\nkind = \"freeze\"\naddress = 2\nstart = \"1s\"\n",
+                        "t.toml");
+  REQUIRE(s.faults.size() == 1);
+  CHECK(s.faults[0].kind == FaultKind::freeze);
+  CHECK(s.faults[0].address == 2);
+  CHECK(s.faults[0].start_s == 1.0);
+}
+
 TEST_CASE("durations") {
   CHECK(parse_duration("500ms") == doctest::Approx(0.5));
   CHECK(parse_duration("10m") == doctest::Approx(600.0));
