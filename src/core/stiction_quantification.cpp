@@ -1,5 +1,8 @@
 #include "valvediag/stiction_quantification.hpp"
 
+#include <nlopt.h>
+
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -233,6 +236,240 @@ std::string pct(double v, int prec = 1) {
   return buf;
 }
 
+// He's bands (fs, fd) of one OP region.
+struct Band {
+  double fs, fd;
+};
+
+// He's valve inside the Hammerstein structure, fitted to the data (op, pv): for a candidate
+// (fs, fd) the valve position x is simulated, and the linear part's simulated output
+//   y(t) = B(q) / A(q) x(t) + c + free response of 1/A (unknown initial state)
+// is linear in (b, c, initial state) for given poles A and delay nk: solved by least squares. The
+// cost is the simulated-output error (eq 20), not the equation error, which measurement noise
+// biases (and which a slow pole makes blind to the valve). Scored from `t0` on: after the OP has
+// travelled its visited range, so He's unknown initial state (his memory before the first slip)
+// is gone, as in the probe.
+class HeDataFit {
+ public:
+  HeDataFit(const HammersteinModel& m, const std::vector<double>& op, const std::vector<double>& y,
+            double width, int max_delay)
+      : u_(op), y_(y) {
+    identity_ = m.block == LinearBlock::Identity;
+    if (!identity_) {
+      nb_ = std::max<int>(1, static_cast<int>(m.b.size()));
+      nk_ = m.structure.nk;
+    }
+    const std::size_t N = u_.size();
+    double travel = 0.0;
+    t0_ = N;
+    for (std::size_t t = 1; t < N; ++t) {
+      travel += std::abs(u_[t] - u_[t - 1]);
+      if (travel >= width) {
+        t0_ = t;
+        break;
+      }
+    }
+    t0_ = std::max(t0_, static_cast<std::size_t>(std::max(nk_, max_delay) + nb_ + 4));
+    double sy = 0, syy = 0, n = 0;
+    for (std::size_t t = t0_; t < N; ++t) {
+      sy += y_[t];
+      syy += y_[t] * y_[t];
+      n += 1;
+    }
+    var_y_ = n > 0 ? syy - sy * sy / n : 0.0;
+    yy_ = syy;
+    set_poles(identity_ ? std::vector<double>{} : m.a);
+  }
+  bool usable() const {
+    return t0_ + 20 < u_.size() && var_y_ > 0 && nb_ + 1 + static_cast<int>(a_.size()) <= 8;
+  }
+  bool identity() const { return identity_; }
+  double var_y() const { return var_y_; }
+  const std::vector<double>& poles() const { return a_; }
+  int delay() const { return nk_; }
+  void set_delay(int nk) { nk_ = std::max(0, nk); }
+  // A's coefficients; the fixed regressors (the constant and the free responses) through 1/A,
+  // and their sums of products, which do not depend on the valve.
+  void set_poles(const std::vector<double>& a) {
+    a_ = a;
+    const std::size_t N = u_.size();
+    fixed_.clear();
+    fixed_.push_back(filter(std::vector<double>(N, 1.0)));
+    for (std::size_t k = 0; k < a_.size() && k < N; ++k) {
+      std::vector<double> d(N, 0.0);
+      d[k] = 1.0;
+      fixed_.push_back(filter(d));
+    }
+    const std::size_t nf = fixed_.size();
+    fixed_gram_.assign(nf * nf, 0.0);
+    fixed_y_.assign(nf, 0.0);
+    for (std::size_t i = 0; i < nf; ++i) {
+      fixed_y_[i] = dot(fixed_[i], y_);
+      for (std::size_t j = 0; j <= i; ++j)
+        fixed_gram_[i * nf + j] = fixed_gram_[j * nf + i] = dot(fixed_[i], fixed_[j]);
+    }
+  }
+
+  // Regions for several bands: R equal parts of [lo, lo + width].
+  void set_regions(double lo, double width) {
+    region_lo_ = lo;
+    region_width_ = width > 0 ? width : 1.0;
+  }
+  std::vector<double> valve(const std::vector<Band>& bands) const {
+    std::vector<double> x;
+    valve_into(bands, x);
+    return x;
+  }
+  std::vector<double> valve(double fs, double fd) const { return valve({{fs, fd}}); }
+  double cost(double fs, double fd) const { return cost(std::vector<Band>{{fs, fd}}); }
+  double cost(const std::vector<Band>& bands) const {
+    valve_into(bands, x_);
+    return cost(x_);
+  }
+  // Residual sum of squares of the simulated output for the valve position x.
+  double cost(const std::vector<double>& x) const {
+    const std::size_t N = u_.size();
+    filter_into(x, f_);
+    // Regressors: B's taps (f delayed), then the fixed ones. Normal equations, scaled.
+    const int nf = static_cast<int>(fixed_.size());
+    const int p = nb_ + nf;
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 8, 8> G(p, p);
+    Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> r(p);
+    auto tap = [&](int j) { return identity_ ? 0 : static_cast<std::size_t>(nk_ + j + 1); };
+    for (int j = 0; j < nb_; ++j) {
+      const std::size_t dj = tap(j);
+      double sy = 0;
+      for (std::size_t t = t0_; t < N; ++t) sy += f_[t - dj] * y_[t];
+      r(j) = sy;
+      for (int k = 0; k <= j; ++k) {
+        const std::size_t dk = tap(k);
+        double s = 0;
+        for (std::size_t t = t0_; t < N; ++t) s += f_[t - dj] * f_[t - dk];
+        G(j, k) = G(k, j) = s;
+      }
+      for (int k = 0; k < nf; ++k) {
+        const auto& g = fixed_[static_cast<std::size_t>(k)];
+        double s = 0;
+        for (std::size_t t = t0_; t < N; ++t) s += f_[t - dj] * g[t];
+        G(j, nb_ + k) = G(nb_ + k, j) = s;
+      }
+    }
+    for (int i = 0; i < nf; ++i) {
+      r(nb_ + i) = fixed_y_[static_cast<std::size_t>(i)];
+      for (int k = 0; k < nf; ++k)
+        G(nb_ + i, nb_ + k) =
+            fixed_gram_[static_cast<std::size_t>(i) * static_cast<std::size_t>(nf) +
+                        static_cast<std::size_t>(k)];
+    }
+    // Scaled, with a tiny ridge: the constant and a slow free response are nearly collinear.
+    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> sc =
+        G.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 8, 8> Gs =
+        sc.asDiagonal() * G * sc.asDiagonal();
+    Gs.diagonal().array() += 1e-10;
+    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> rs = sc.asDiagonal() * r;
+    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> th = Gs.ldlt().solve(rs);
+    return std::max(0.0, yy_ - th.dot(rs));
+  }
+
+ private:
+  // He's flowchart as the simulator and a PLC-driven valve see it: the OP is held between
+  // samples (zero-order hold), so the valve takes each sample's OP change as one step and slips
+  // at most once per sample (the probe's He above mimics the Preisach model's input instead).
+  // With several bands, the band of the region the valve is held in applies, as
+  // PositionDependentStiction in src/sim has it.
+  void valve_into(const std::vector<Band>& bands, std::vector<double>& x) const {
+    const int R = static_cast<int>(bands.size());
+    double u_prev = u_.front(), xv = u_prev, u_r = 0.0;
+    x.resize(u_.size());
+    for (std::size_t t = 0; t < u_.size(); ++t) {
+      const Band& b = R == 1
+                          ? bands.front()
+                          : bands[static_cast<std::size_t>(std::clamp(
+                                static_cast<int>(std::floor((xv - region_lo_) / region_width_ * R)),
+                                0, R - 1))];
+      const double u_cum = u_r + (u_[t] - u_prev);
+      u_prev = u_[t];
+      if (std::abs(u_cum) > b.fs) {
+        u_r = u_cum > 0 ? b.fd : -b.fd;
+        xv = u_[t] - u_r;
+      } else {
+        u_r = u_cum;
+      }
+      x[t] = xv;
+    }
+  }
+  // 1/A(q) from rest (no poles: the input itself).
+  void filter_into(const std::vector<double>& in, std::vector<double>& z) const {
+    z.resize(in.size());
+    for (std::size_t t = 0; t < in.size(); ++t) {
+      double v = in[t];
+      for (std::size_t i = 1; i <= a_.size() && i <= t; ++i) v -= a_[i - 1] * z[t - i];
+      z[t] = v;
+    }
+  }
+  std::vector<double> filter(const std::vector<double>& in) const {
+    std::vector<double> z;
+    filter_into(in, z);
+    return z;
+  }
+  // Over the scored samples.
+  double dot(const std::vector<double>& p, const std::vector<double>& q) const {
+    double s = 0;
+    for (std::size_t t = t0_; t < u_.size(); ++t) s += p[t] * q[t];
+    return s;
+  }
+  const std::vector<double>& u_;
+  const std::vector<double>& y_;
+  bool identity_ = false;
+  std::vector<double> a_;
+  int nb_ = 1, nk_ = 0;
+  std::size_t t0_ = 0;
+  std::vector<std::vector<double>> fixed_;
+  std::vector<double> fixed_gram_, fixed_y_;
+  double var_y_ = 0.0, yy_ = 0.0;
+  double region_lo_ = 0.0, region_width_ = 1.0;
+  mutable std::vector<double> x_, f_;  // scratch
+};
+
+// The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
+// b, c and the initial state by least squares inside. Returns the cost; fit keeps the best poles.
+double refine_poles(HeDataFit& fit, const std::vector<double>& x) {
+  std::vector<double> a = fit.poles();
+  double best = fit.cost(x);
+  if (a.empty()) return best;
+  struct Ctx {
+    HeDataFit* fit;
+    const std::vector<double>* x;
+  } ctx{&fit, &x};
+  auto f = [](unsigned n, const double* z, double*, void* data) {
+    auto* c = static_cast<Ctx*>(data);
+    std::vector<double> av(z, z + n);
+    if (!is_stable(av, 1e-6)) return 1e300;
+    c->fit->set_poles(av);
+    return c->fit->cost(*c->x);
+  };
+  const unsigned n = static_cast<unsigned>(a.size());
+  nlopt_opt o = nlopt_create(NLOPT_LN_NELDERMEAD, n);
+  nlopt_set_min_objective(o, f, &ctx);
+  // Steps small against the distance to the unit circle: a slow pole sits within 1e-3 of it.
+  const double margin = std::max(1e-4, 1.0 - spectral_radius(a));
+  std::vector<double> dx(n, 0.3 * margin);
+  nlopt_set_initial_step(o, dx.data());
+  nlopt_set_xtol_abs1(o, 1e-3 * margin);
+  nlopt_set_maxeval(o, 150);
+  std::vector<double> z = a;
+  double fz = best;
+  const nlopt_result res = nlopt_optimize(o, z.data(), &fz);
+  nlopt_destroy(o);
+  if (res > 0 && fz < best) {
+    best = fz;
+    a = z;
+  }
+  fit.set_poles(a);
+  return best;
+}
+
 }  // namespace
 
 StictionQuantification quantify_stiction(const HammersteinModel& model,
@@ -245,7 +482,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   const double delta = g.delta();
   StictionQuantification q;
   q.resolution_percent = delta;
-  q.overall = unmeasured();
+  q.overall = q.preisach = unmeasured();
 
   // The visited range: the data's OP extremes, or the whole grid.
   double umin = std::numeric_limits<double>::infinity(), umax = -umin;
@@ -270,7 +507,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
     auto& reg = q.regions[static_cast<std::size_t>(r)];
     reg.op_lo = q.op_lo + width * r / R;
     reg.op_hi = q.op_lo + width * (r + 1) / R;
-    reg.figures = unmeasured();
+    reg.figures = reg.preisach = unmeasured();
     reg.visited = !q.data_given;
   }
   auto region_of = [&](double u) {
@@ -427,6 +664,163 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   } else {
     q.summary = "no stiction resolved: the band is below the grid step " + pct(delta) + " %";
   }
+  q.preisach = q.overall;
+  for (auto& reg : q.regions) reg.preisach = reg.figures;
+  return q;
+}
+
+StictionQuantification quantify_stiction(const HammersteinModel& model,
+                                         const std::vector<double>& op,
+                                         const std::vector<double>& pv,
+                                         const StictionQuantificationOptions& opt) {
+  StictionQuantification q = quantify_stiction(model, op, opt);
+  q.preisach = q.overall;
+  if (!q.stiction || !opt.refine_on_data || pv.size() != op.size()) return q;
+  // The longest stretch where both are finite: the linear part needs consecutive samples.
+  std::size_t best_from = 0, best_len = 0;
+  for (std::size_t t = 0; t < op.size();) {
+    std::size_t e = t;
+    while (e < op.size() && std::isfinite(op[e]) && std::isfinite(pv[e])) ++e;
+    if (e - t > best_len) {
+      best_from = t;
+      best_len = e - t;
+    }
+    t = e + 1;
+  }
+  const auto from = static_cast<std::ptrdiff_t>(best_from);
+  const auto to = static_cast<std::ptrdiff_t>(best_from + best_len);
+  const std::vector<double> u(op.begin() + from, op.begin() + to);
+  const std::vector<double> y(pv.begin() + from, pv.begin() + to);
+  HeDataFit fit(model, u, y, q.op_hi - q.op_lo, model.structure.nk + opt.refine_delay_range);
+  if (!fit.usable()) return q;
+
+  const double delta = q.resolution_percent;
+  const double width = q.op_hi - q.op_lo;
+  const double fs0 = q.overall.fs_percent, fd0 = q.overall.fd_percent;
+  // The linear part for a valve position x: delay (nk +- the range) and poles by output error.
+  auto refine_linear = [&](const std::vector<double>& x) {
+    const std::vector<double> a0 = fit.poles();
+    const int nk0 = fit.delay();
+    double best = std::numeric_limits<double>::infinity();
+    std::vector<double> best_a = a0;
+    int best_nk = nk0;
+    for (int nk = std::max(0, nk0 - opt.refine_delay_range); nk <= nk0 + opt.refine_delay_range;
+         ++nk) {
+      fit.set_delay(nk);
+      fit.set_poles(a0);
+      const double c = refine_poles(fit, x);
+      if (c < best) {
+        best = c;
+        best_a = fit.poles();
+        best_nk = nk;
+      }
+    }
+    fit.set_delay(best_nk);
+    fit.set_poles(best_a);
+    return best;
+  };
+  // The identified linear part came with the Preisach valve and from the equation error: re-fit
+  // it by output error to the Preisach valve's own position first, so that the search for He's
+  // figures starts from poles that do not depend on He's candidate.
+  const bool arx = !fit.identity();
+  if (arx) refine_linear(simulate_valve(model, u));
+  const std::vector<double> a_start = fit.poles();
+  const int nk_start = fit.delay();
+
+  // The cost is rugged: a candidate that moves one slip by a sample, or adds one to a sweep, costs
+  // much more than the truth, so its valleys are a tenth of a % wide. A fine grid over a window of
+  // a few Preisach grid steps around the Preisach figures, then the best few separate valleys
+  // are each polished (linear part, then a finer grid) and the best wins.
+  const double h = std::clamp((fs0 + fd0) / 40, 0.02, 0.1);
+  const double W = opt.refine_window_steps * delta;
+  struct Point {
+    double cost, fs, fd;
+  };
+  std::vector<Point> pts;
+  for (double fs = std::max(0.0, fs0 - W); fs <= std::min(fs0 + W, width) + 1e-9; fs += h)
+    for (double fd = 0.0; fd <= std::min(fs, fd0 + W) + 1e-9; fd += h)
+      pts.push_back({fit.cost(fs, fd), fs, fd});
+  std::sort(pts.begin(), pts.end(), [](const Point& l, const Point& r) { return l.cost < r.cost; });
+  std::vector<Point> starts;
+  for (const Point& pt : pts) {
+    if (static_cast<int>(starts.size()) >= opt.refine_starts) break;
+    bool separate = true;
+    for (const Point& st : starts)
+      separate = separate && std::max(std::abs(st.fs - pt.fs), std::abs(st.fd - pt.fd)) > delta / 2;
+    if (separate) starts.push_back(pt);
+  }
+  Point best{std::numeric_limits<double>::infinity(), fs0, fd0};
+  for (Point cur : starts) {
+    fit.set_poles(a_start);
+    fit.set_delay(nk_start);
+    for (int pass = 0; pass < (arx ? opt.refine_passes : 1); ++pass) {
+      if (arx) refine_linear(fit.valve(cur.fs, cur.fd));
+      cur.cost = fit.cost(cur.fs, cur.fd);
+      const Point c0 = cur;
+      const double hh = h / 4;
+      for (double fs = std::max(0.0, c0.fs - 4 * h); fs <= c0.fs + 4 * h + 1e-9; fs += hh)
+        for (double fd = std::max(0.0, c0.fd - 4 * h); fd <= std::min(fs, c0.fd + 4 * h) + 1e-9;
+             fd += hh) {
+          const double c = fit.cost(fs, fd);
+          if (c < cur.cost) cur = {c, fs, fd};
+        }
+    }
+    if (cur.cost < best.cost) best = cur;
+  }
+  const double bfs = best.fs, bfd = best.fd, bcost = best.cost;
+  // The linear part of the winner (the loop above leaves the last start's).
+  fit.set_poles(a_start);
+  fit.set_delay(nk_start);
+  if (arx) refine_linear(fit.valve(bfs, bfd));
+
+  // Per region: He's bands where the valve sticks in that region (PositionDependentStiction),
+  // each region's band searched in turn around the overall figures, the others held, with the
+  // overall linear part. A region the data did not visit keeps the Preisach probe's figures.
+  const int R = static_cast<int>(q.regions.size());
+  if (opt.refine_regions && R > 1) {
+    fit.set_regions(q.op_lo, width);
+    std::vector<Band> bands(static_cast<std::size_t>(R), Band{bfs, bfd});
+    double cost = fit.cost(bands);
+    for (int sweep = 0; sweep < 2; ++sweep) {
+      for (int r = 0; r < R; ++r) {
+        if (!q.regions[static_cast<std::size_t>(r)].valid) continue;
+        Band& b = bands[static_cast<std::size_t>(r)];
+        auto local = [&](Band centre, double half, double step) {
+          for (double fs = std::max(0.0, centre.fs - half); fs <= centre.fs + half + 1e-9;
+               fs += step)
+            for (double fd = std::max(0.0, centre.fd - half);
+                 fd <= std::min(fs, centre.fd + half) + 1e-9; fd += step) {
+              const Band keep = b;
+              b = {fs, fd};
+              const double c = fit.cost(bands);
+              if (c < cost)
+                cost = c;
+              else
+                b = keep;
+            }
+        };
+        if (sweep == 0) local({bfs, bfd}, W, 2 * h);
+        local(b, 2 * h, h / 2);
+      }
+      if (arx) {  // the linear part for the valve with its regions
+        refine_linear(fit.valve(bands));
+        cost = fit.cost(bands);
+      }
+    }
+    for (int r = 0; r < R; ++r) {
+      auto& reg = q.regions[static_cast<std::size_t>(r)];
+      if (!reg.valid) continue;
+      const Band& b = bands[static_cast<std::size_t>(r)];
+      reg.figures = figures(b.fs, b.fd, cost, fit.var_y());
+      reg.stiction = reg.figures.band_percent > 0;
+    }
+  }
+  q.refined = true;
+  q.overall = figures(bfs, bfd, bcost, fit.var_y());
+  q.summary = "stiction: fs " + pct(q.overall.fs_percent) + " %, fd " + pct(q.overall.fd_percent) +
+              " % of travel (band " + pct(q.overall.band_percent) + " %, slip jump " +
+              pct(q.overall.jump_percent) + " %) over OP " + pct(q.op_lo) + "-" + pct(q.op_hi) +
+              " %";
   return q;
 }
 

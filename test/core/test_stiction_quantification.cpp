@@ -7,10 +7,12 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 #include "valvediag/identification.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/stiction_quantification.hpp"
+#include "valvediag/valve_effects.hpp"
 
 using namespace valvediag;
 
@@ -147,22 +149,30 @@ TEST_CASE("regions the data did not visit are flagged, the probe stays in the vi
 namespace {
 
 struct Case {
-  std::string loop;  // "ex1": the paper's Example 1 loop; "fopdt": a faster temperature-like loop
+  // "ex1": the paper's Example 1 loop; "fopdt": a faster temperature-like loop; "so": a
+  // second-order loop; "int": an integrating (level-like) loop.
+  std::string loop;
   double fs, fd, noise;
   std::uint64_t seed;
 };
+
+double process_gain(const std::string& loop) {
+  return loop == "ex1" ? 3.8163 : loop == "fopdt" ? 1.2 : loop == "so" ? 1.5 : 1.0;
+}
 
 // The loop of a case: the scenario's controller and process with He's valve, the noise level,
 // and set-point steps large enough that the OP sweeps more than 2 fs (so that the data says how
 // the band splits into fs and fd).
 Scenario case_loop(const Case& c) {
-  Scenario s = scenario_by_name(c.loop == "ex1" ? "paper-ex1" : "deadband");
+  Scenario s = scenario_by_name(c.loop == "ex1"     ? "paper-ex1"
+                                : c.loop == "fopdt" ? "deadband"
+                                : c.loop == "so"    ? "second-order"
+                                                    : "integrating");
   s.loop.valve = {HeStiction(c.fs, c.fd)};
   s.loop.measurement_noise_std = c.noise;
   s.loop.disturbances = {};
-  const double k = c.loop == "ex1" ? 3.8163 : 1.2;
-  const double step = k * std::max(2.2 * c.fs, 6.0);  // PV units for an OP move of 2.2 fs
-  const double pv0 = c.loop == "ex1" ? 50.0 : 50.0;
+  const double step = process_gain(c.loop) * std::max(2.2 * c.fs, 6.0);  // OP move of 2.2 fs
+  const double pv0 = 50.0;
   const double T = c.loop == "ex1" ? 500.0 : 600.0;
   s.loop.setpoint = {{0.0, pv0},
                      {0.1 * T, pv0 + step / 2},
@@ -173,47 +183,92 @@ Scenario case_loop(const Case& c) {
   return s;
 }
 
+FitOptions case_fit_options(const std::string& loop) {
+  FitOptions o;
+  o.na_max = 2;
+  o.nb_max = loop == "so" ? 2 : 1;
+  o.nk_min = loop == "ex1" ? 3 : 2;
+  o.nk_max = loop == "ex1" ? 7 : 6;
+  o.L_min = 12;
+  o.L_max = 30;
+  return o;
+}
+
 }  // namespace
 
 TEST_CASE("validation: He's fs and fd recovered from identified Preisach models of closed loops") {
+  // Cases 1-12 were chosen before the method was refined; 13-19 were added afterwards to check
+  // that it generalises (other seeds, a second-order and an integrating process, small bands).
   const std::vector<Case> cases = {
-      {"ex1", 8.4, 3.5243, 0.1, 1}, {"ex1", 8.4, 3.5243, 0.3, 2},  {"ex1", 4.0, 1.0, 0.1, 3},
-      {"ex1", 6.0, 3.0, 0.2, 4},    {"ex1", 3.0, 1.5, 0.05, 5},    {"ex1", 10.0, 2.0, 0.1, 6},
-      {"fopdt", 8.0, 3.0, 0.1, 7},  {"fopdt", 5.0, 2.0, 0.1, 8},   {"fopdt", 3.0, 1.0, 0.05, 9},
-      {"fopdt", 6.0, 1.0, 0.3, 10}, {"fopdt", 10.0, 4.0, 0.2, 11}, {"fopdt", 4.0, 3.0, 0.1, 12},
+      {"ex1", 8.4, 3.5243, 0.1, 1},  {"ex1", 8.4, 3.5243, 0.3, 2},  {"ex1", 4.0, 1.0, 0.1, 3},
+      {"ex1", 6.0, 3.0, 0.2, 4},     {"ex1", 3.0, 1.5, 0.05, 5},    {"ex1", 10.0, 2.0, 0.1, 6},
+      {"fopdt", 8.0, 3.0, 0.1, 7},   {"fopdt", 5.0, 2.0, 0.1, 8},   {"fopdt", 3.0, 1.0, 0.05, 9},
+      {"fopdt", 6.0, 1.0, 0.3, 10},  {"fopdt", 10.0, 4.0, 0.2, 11}, {"fopdt", 4.0, 3.0, 0.1, 12},
+      {"ex1", 8.4, 3.5243, 0.1, 21}, {"fopdt", 6.0, 2.0, 0.2, 22},  {"so", 5.0, 2.0, 0.1, 23},
+      {"so", 8.0, 1.5, 0.2, 24},     {"int", 5.0, 2.0, 0.1, 25},    {"so", 3.0, 0.5, 0.1, 26},
+      {"fopdt", 2.0, 1.0, 0.05, 27},
   };
   const auto start = std::chrono::steady_clock::now();
-  int ok_count = 0;
-  std::printf("\nstiction quantification (He truth vs Preisach estimate, %% of travel)\n");
-  std::printf("%-5s %-6s %5s %5s %5s | %6s %6s | %6s %6s | %5s %6s %4s %s\n", "case", "loop",
-              "noise", "L", "delta", "fs", "fd", "fs^", "fd^", "fit", "valve%", "jump", "ok");
+  int ok_count = 0, preisach_ok = 0;
+  std::printf(
+      "\nstiction quantification (He truth vs estimate, %% of travel): Preisach probe, "
+      "then refined on the data\n");
+  std::printf("%-4s %-5s %5s %3s %5s | %5s %5s | %5s %5s | %5s %5s | %5s %s\n", "case", "loop",
+              "noise", "L", "delta", "fs", "fd", "P fs^", "P fd^", "fs^", "fd^", "fit", "ok");
   for (std::size_t i = 0; i < cases.size(); ++i) {
     const Case& c = cases[i];
-    const Scenario s = case_loop(c);
-    const LoopData d = run_scenario(s, c.seed, 0);
-    FitOptions o;
-    o.na_max = 2;
-    o.nb_max = 1;
-    o.nk_min = c.loop == "ex1" ? 3 : 2;
-    o.nk_max = c.loop == "ex1" ? 7 : 6;
-    o.L_min = 12;
-    o.L_max = 30;
-    const IdentificationResult r = identify(d.op, d.pv, o);
-    const auto q = quantify_stiction(r.model, d.op);
+    const LoopData d = run_scenario(case_loop(c), c.seed, 0);
+    const IdentificationResult r = identify(d.op, d.pv, case_fit_options(c.loop));
+    const auto q = quantify_stiction(r.model, d.op, d.pv);
+    CHECK(q.refined);
     const bool ok =
         q.stiction && within(q.overall.fs_percent, c.fs) && within(q.overall.fd_percent, c.fd);
     ok_count += ok;
-    std::printf("%-5zu %-6s %5.2f %5d %5.2f | %6.2f %6.2f | %6.2f %6.2f | %5.1f %6.1f %4s %s\n",
+    preisach_ok += within(q.preisach.fs_percent, c.fs) && within(q.preisach.fd_percent, c.fd);
+    std::printf("%-4zu %-5s %5.2f %3d %5.2f | %5.2f %5.2f | %5.2f %5.2f | %5.2f %5.2f | %5.1f %s\n",
                 i + 1, c.loop.c_str(), c.noise, r.model.grid.L, q.resolution_percent, c.fs, c.fd,
-                q.overall.fs_percent, q.overall.fd_percent, r.fitness_percent,
-                q.overall.fit_percent, q.jump_identified ? "yes" : "no", ok ? "ok" : "MISS");
+                q.preisach.fs_percent, q.preisach.fd_percent, q.overall.fs_percent,
+                q.overall.fd_percent, q.overall.fit_percent, ok ? "ok" : "MISS");
   }
   const double elapsed =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("%d of %zu within 20 %% or 0.5 %% of travel (%.1f s)\n", ok_count, cases.size(),
-              elapsed);
-  // The target is 90 % of the cases; the method reaches 5 of 12 (measured, Release) and this
-  // floor guards against regressions until it improves. Misses underestimate fs: the band the
-  // identified model shows is short by about a grid step or more (see the table).
-  CHECK(ok_count >= 5);
+  std::printf("%d of %zu within 20 %% or 0.5 %% of travel (Preisach probe alone: %d) (%.1f s)\n",
+              ok_count, cases.size(), preisach_ok, elapsed);
+  // Measured (Release): 19 of 19 refined; the Preisach probe alone 10 of 19 (5 of the first 12):
+  // its band is known to a grid step only and a fitted lattice's weights shorten it, even fitted
+  // to the noise-free valve position. The goal is 90 %; the floor is the measurement.
+  CHECK(ok_count >= 19);
+}
+
+TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more") {
+  // PositionDependentStiction: fs 8, fd 3 below 40 % of travel, fs 3, fd 1 above 60 %
+  // (interpolated between), in the fast loop with the OP held low, then high, then low.
+  Scenario s = scenario_by_name("deadband");
+  s.loop.valve = {PositionDependentStiction({{40.0, 8.0, 3.0}, {60.0, 3.0, 1.0}})};
+  s.loop.disturbances = {};
+  s.loop.setpoint = {{0.0, 50.0}, {100.0, 30.0}, {1000.0, 70.0}, {2000.0, 30.0}, {2600.0, 50.0}};
+  for (std::uint64_t seed : {31, 32}) {
+    CAPTURE(seed);
+    const LoopData d = run_scenario(s, seed, 3000);
+    const IdentificationResult r = identify(d.op, d.pv, case_fit_options("fopdt"));
+    const auto q = quantify_stiction(r.model, d.op, d.pv);
+    REQUIRE(q.regions.size() == 3);
+    std::printf("\nasymmetric valve, seed %d: truth fs 8 fd 3 below 40 %%, fs 3 fd 1 above 60 %%\n",
+                static_cast<int>(seed));
+    std::printf("%12s | %5s %5s | %5s %5s | %s\n", "OP region", "P fs^", "P fd^", "fs^", "fd^",
+                "valid");
+    for (const auto& g : q.regions)
+      std::printf("%5.1f-%5.1f | %5.2f %5.2f | %5.2f %5.2f | %s\n", g.op_lo, g.op_hi,
+                  g.preisach.fs_percent, g.preisach.fd_percent, g.figures.fs_percent,
+                  g.figures.fd_percent, g.valid ? "yes" : "no");
+    const auto& low = q.regions.front();
+    const auto& high = q.regions.back();
+    REQUIRE(low.valid);
+    REQUIRE(high.valid);
+    // The regions are equal parts of the visited OP range, not the valve's: the middle one mixes
+    // both frictions and the outer ones are only roughly the truth (measured: low 5.8/4.2 and
+    // 8.0/3.6, high 3.1/1.1 and 6.8/2.1), so only the order is asserted.
+    CHECK(low.figures.band_percent > high.figures.band_percent);
+    CHECK(low.figures.fs_percent > 5.0);
+  }
 }
