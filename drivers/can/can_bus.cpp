@@ -6,12 +6,15 @@
 #include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <mutex>
 #include <thread>
@@ -56,6 +59,65 @@ std::optional<CanFrame> FdCanTransport::receive(double timeout_s) {
                              " bytes, not a struct can_frame (" + std::to_string(sizeof f) + ")");
   if (f.can_id & (CAN_ERR_FLAG | CAN_RTR_FLAG)) return std::nullopt;  // no data in these
   return from_linux(f);
+}
+
+namespace {
+// A connected, receive-only SOCK_SEQPACKET socket to the simulated PLC at `path`.
+int connect_frame_socket(const std::string& path) {
+  const std::string start =
+      "; start the simulated PLC first: valvediag sim-plc --config SITE "
+      "--can-socket " +
+      path;
+  sockaddr_un a{};
+  if (path.empty() || path.size() >= sizeof a.sun_path)
+    throw std::runtime_error("CAN socket path '" + path + "' is empty or longer than " +
+                             std::to_string(sizeof a.sun_path - 1) + " bytes; choose another");
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISSOCK(st.st_mode))
+    throw std::runtime_error("CAN socket '" + path +
+                             "' exists but is not a socket; check interface = \"unix:" + path +
+                             "\"");
+  const int s = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+  if (s < 0)
+    throw std::runtime_error(std::string("cannot create a Unix socket: ") + std::strerror(errno));
+  a.sun_family = AF_UNIX;
+  std::memcpy(a.sun_path, path.c_str(), path.size());
+  if (::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a) < 0) {
+    const int err = errno;
+    ::close(s);
+    if (err == ENOENT) throw std::runtime_error("CAN socket '" + path + "' does not exist" + start);
+    if (err == ECONNREFUSED)
+      throw std::runtime_error("nobody listens on CAN socket '" + path +
+                               "' (left behind by a stopped simulated PLC?)" + start);
+    if (err == EPROTOTYPE)
+      throw std::runtime_error("'" + path +
+                               "' is not a SOCK_SEQPACKET socket of the simulated PLC" + start);
+    throw std::runtime_error("cannot connect to CAN socket '" + path + "': " + std::strerror(err));
+  }
+  ::shutdown(s, SHUT_WR);  // read only, enforced by the kernel
+  return s;
+}
+}  // namespace
+
+UnixCanTransport::UnixCanTransport(std::string path) : path_(std::move(path)) {
+  reopen();
+}
+UnixCanTransport::~UnixCanTransport() = default;
+
+void UnixCanTransport::reopen() {
+  fd_.reset();
+  fd_ = std::make_unique<FdCanTransport>(connect_frame_socket(path_), true);
+}
+
+std::optional<CanFrame> UnixCanTransport::receive(double timeout_s) {
+  if (!fd_) throw std::runtime_error("CAN socket '" + path_ + "' is not connected");
+  try {
+    return fd_->receive(timeout_s);
+  } catch (const std::runtime_error& e) {
+    fd_.reset();
+    throw std::runtime_error("CAN socket '" + path_ + "': " + e.what() +
+                             " (the simulated PLC stopped?)");
+  }
 }
 
 std::unique_ptr<CanTransport> open_socketcan(const std::string& interface) {
@@ -166,11 +228,15 @@ std::size_t CanDecoder::apply(const CanFrame& frame, Clock::time_point now) {
       const PointConfig& p = loops_[l].points[i];
       if (!p.present || p.can.frame_id != frame.id || p.can.extended != frame.extended) continue;
       Slot& s = slots_[l][i];
+      double v = 0.0;
       try {
-        s.value = decode_can_signal(p.can, std::span<const std::uint8_t>(frame.data, frame.dlc));
+        v = decode_can_signal(p.can, std::span<const std::uint8_t>(frame.data, frame.dlc));
       } catch (const std::invalid_argument&) {
         continue;  // a frame shorter than the signal: not this value
       }
+      // The decoded value is a function of the signal's raw bits: equal values, equal bits.
+      if (!s.seen || v != s.value) s.changed = now;
+      s.value = v;
       s.when = now;
       s.seen = true;
       ++n;
@@ -205,9 +271,18 @@ LoopValues CanDecoder::values(std::size_t loop, Clock::time_point now) const {
       continue;
     }
     const bool fresh = now - s.when <= max_age;
-    out.points[i] = {s.value, fresh ? Quality::good : Quality::stale};
-    if (!fresh && out.error.empty())
+    const double same_s = std::chrono::duration<double>(now - s.changed).count();
+    const bool frozen = p.stale_after_s > 0 && same_s > p.stale_after_s;
+    out.points[i] = {s.value, fresh && !frozen ? Quality::good : Quality::stale};
+    if (out.error.empty() && !fresh)
       out.error = l.name + "." + to_string(static_cast<PointName>(i)) + ": frame stopped coming";
+    if (out.error.empty() && frozen) {
+      char b[96];
+      std::snprintf(b, sizeof b, "unchanged for %.1f s (stale_after %g s)", same_s,
+                    p.stale_after_s);
+      out.error = l.name + "." + to_string(static_cast<PointName>(i)) + ": " + b +
+                  "; the PLC may have stopped updating it";
+    }
   }
   return out;
 }
@@ -226,23 +301,52 @@ struct CanBus::Impl {
       : cfg(std::move(c)), transport(std::move(t)), decoder(std::move(loops)) {}
 
   void receive_loop() {
+    Backoff backoff(1.0);
     while (running) {
       std::optional<CanFrame> f;
       try {
         f = transport->receive(0.05);
       } catch (const std::exception& e) {
-        std::lock_guard lock(mutex);
-        st.connected = false;
-        ++st.errors;
-        ++st.disconnects;
-        st.last_error = e.what();
-        return;  // a broken transport stays broken; values age into stale
+        {
+          std::lock_guard lock(mutex);
+          st.connected = false;
+          ++st.errors;
+          ++st.disconnects;
+          st.last_error = e.what();
+        }
+        // Meanwhile the values age into stale; a transport that cannot reopen stays broken.
+        if (!transport->can_reopen() || !reopen(backoff)) return;
+        continue;
       }
       if (!f) continue;
       std::lock_guard lock(mutex);
       ++frames;
       decoder.apply(*f, Clock::now());
     }
+  }
+
+  // Reopens with backoff until it works (true) or the bus is closed (false).
+  bool reopen(Backoff& backoff) {
+    while (running) {
+      const auto until = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                            std::chrono::duration<double>(backoff.next()));
+      while (running && Clock::now() < until)  // short slices: the destructor is prompt
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      if (!running) break;
+      std::lock_guard lock(mutex);
+      ++st.connect_attempts;
+      try {
+        transport->reopen();
+      } catch (const std::exception& e) {
+        st.last_error = e.what();
+        continue;
+      }
+      st.connected = true;
+      ++st.reconnects;
+      backoff.reset();
+      return true;
+    }
+    return false;
   }
 };
 

@@ -1,6 +1,7 @@
-// The simulated PLC: one simulation thread steps the loops on a monotonic clock and writes their
-// values into the register map; one server thread answers Modbus TCP requests from that map
-// (under one mutex, so the values of one request always come from the same step).
+// The simulated PLC: one simulation thread steps the loops on a monotonic clock, writes their
+// values into the register map and their CAN frames to the frame sockets (accepting CAN clients
+// between steps); one server thread answers Modbus TCP requests from that map (under one mutex,
+// so the values of one request always come from the same step).
 #include "valvediag/sim_plc.hpp"
 
 #include <arpa/inet.h>
@@ -9,6 +10,8 @@
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -37,12 +40,58 @@ bool is_write(int fc) {
 
 struct ServedLoop {
   const LoopConfigEntry* cfg;
+  const BusConfig* bus;
   bool can;
   std::unique_ptr<LoopSimulator> sim;
   double period_real_s;  // Ts / speed
   std::uint64_t steps = 0;
   LoopSample last{};
+  std::array<double, kPointCount> held{};  // the values last served, kept by a freeze fault
 };
+
+// A Unix SOCK_SEQPACKET socket serving the frames of one CAN bus to every connected client.
+struct CanEndpoint {
+  const BusConfig* bus;
+  std::string path;
+  int listen_fd = -1;
+  std::vector<int> clients;
+};
+
+// Listens on `path`, replacing a socket file left by a stopped server (never a live one, nor
+// a file that is not a socket).
+int listen_frame_socket(const std::string& path) {
+  sockaddr_un a{};
+  if (path.empty() || path.size() >= sizeof a.sun_path)
+    throw std::runtime_error("CAN socket path '" + path + "' is empty or longer than " +
+                             std::to_string(sizeof a.sun_path - 1) + " bytes; choose another");
+  a.sun_family = AF_UNIX;
+  std::memcpy(a.sun_path, path.c_str(), path.size());
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) == 0) {
+    if (!S_ISSOCK(st.st_mode))
+      throw std::runtime_error("cannot serve CAN frames on '" + path +
+                               "': it exists and is not a socket; remove it or choose another "
+                               "path");
+    const int probe = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+    const bool live =
+        probe >= 0 && ::connect(probe, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+    if (probe >= 0) ::close(probe);
+    if (live)
+      throw std::runtime_error("another simulated PLC serves CAN frames on '" + path +
+                               "'; stop it or choose another path");
+    ::unlink(path.c_str());  // left behind by a server that did not stop cleanly
+  }
+  const int s = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  if (s < 0)
+    throw std::runtime_error(std::string("cannot create a Unix socket: ") + std::strerror(errno));
+  if (::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a) < 0 || ::listen(s, 16) < 0) {
+    const int err = errno;
+    ::close(s);
+    throw std::runtime_error("cannot serve CAN frames on '" + path + "': " + std::strerror(err) +
+                             "; check that its directory exists and is writable");
+  }
+  return s;
+}
 
 struct ActiveFault {
   FaultConfig f;
@@ -58,9 +107,11 @@ struct SimPlc::Impl {
   std::vector<ServedLoop> loops;
   int port = -1;
 
-  mutable std::mutex map_mutex;  // registers, latest samples, CAN fd
+  mutable std::mutex map_mutex;  // registers, latest samples, CAN fd and endpoints
   modbus_mapping_t* map = nullptr;
   int can_fd = -1;
+  std::vector<CanEndpoint> can_eps;
+  std::atomic<std::uint64_t> can_accepted{0}, can_from_clients{0};
 
   std::mutex fault_mutex;
   std::vector<ActiveFault> faults;
@@ -89,8 +140,39 @@ struct SimPlc::Impl {
     for (std::size_t i = 0; i < register_count(p.type); ++i) tab[p.address + i] = regs[i];
   }
 
+  // Points of loop `l` held by an active freeze fault: those whose registers cover the fault's
+  // address (of its register type); every point, CAN signals too, when it names neither.
+  std::array<bool, kPointCount> frozen(const ServedLoop& l) {
+    std::array<bool, kPointCount> out{};
+    std::lock_guard lock(fault_mutex);
+    const auto now = Clock::now();
+    for (const auto& a : faults) {
+      if (a.f.kind != FaultKind::freeze) continue;
+      const double t = std::chrono::duration<double>(now - a.origin).count();
+      if (t < a.f.start_s || t >= a.f.start_s + a.f.duration_s) continue;
+      for (std::size_t i = 0; i < kPointCount; ++i) {
+        const PointConfig& p = l.cfg->points[i];
+        if (!p.present) continue;
+        if (l.can) {
+          out[i] = out[i] || (!a.f.address && !a.f.reg);
+          continue;
+        }
+        const int end = p.address + static_cast<int>(register_count(p.type));
+        const bool reg_ok = !a.f.reg || *a.f.reg == p.reg;
+        const bool addr_ok = !a.f.address || (*a.f.address >= p.address && *a.f.address < end);
+        out[i] = out[i] || (reg_ok && addr_ok);
+      }
+    }
+    return out;
+  }
+
   void publish(ServedLoop& l, const LoopSample& s) {
-    const double values[kPointCount] = {s.op, s.pv, s.sp, s.mv, 1.0 /* mode: auto */};
+    const std::array<bool, kPointCount> hold = frozen(l);
+    double values[kPointCount] = {s.op, s.pv, s.sp, s.mv, 1.0 /* mode: auto */};
+    for (std::size_t i = 0; i < kPointCount; ++i) {
+      if (hold[i] && l.steps > 0) values[i] = l.held[i];
+      l.held[i] = values[i];
+    }
     std::lock_guard lock(map_mutex);
     l.last = s;
     ++l.steps;
@@ -98,7 +180,6 @@ struct SimPlc::Impl {
       for (std::size_t i = 0; i < kPointCount; ++i) write_point(l.cfg->points[i], values[i]);
       return;
     }
-    if (can_fd < 0) return;
     // One frame per frame id, carrying every signal of this loop that lives in it.
     std::map<std::uint32_t, can_frame> frames;
     for (std::size_t i = 0; i < kPointCount; ++i) {
@@ -113,14 +194,70 @@ struct SimPlc::Impl {
       }
       encode_can_signal(p.can, values[i], std::span<std::uint8_t>(f.data, 8));
     }
-    for (const auto& [id, f] : frames)
-      if (::send(can_fd, &f, sizeof f, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) break;  // reader gone
+    if (can_fd >= 0)
+      for (const auto& [id, f] : frames)
+        if (::send(can_fd, &f, sizeof f, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) break;  // reader gone
+    for (auto& ep : can_eps) {
+      if (ep.bus != l.bus) continue;
+      std::vector<int> keep;
+      for (int c : ep.clients) {
+        bool alive = true;
+        for (const auto& [id, f] : frames)
+          if (::send(c, &f, sizeof f, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) {
+            // A full buffer (a slow client) loses this step's frames, as a real bus would.
+            alive = errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS;
+            break;
+          }
+        if (alive)
+          keep.push_back(c);
+        else
+          ::close(c);
+      }
+      ep.clients = std::move(keep);
+    }
+  }
+
+  // New CAN clients, and a check that none of them sends anything (they only read).
+  void serve_can_clients() {
+    std::lock_guard lock(map_mutex);
+    for (auto& ep : can_eps) {
+      if (ep.listen_fd < 0) continue;
+      for (int c; (c = ::accept4(ep.listen_fd, nullptr, nullptr, SOCK_CLOEXEC)) >= 0;) {
+        ep.clients.push_back(c);
+        ++can_accepted;
+      }
+      for (int c : ep.clients) {
+        char buf[64];
+        const ssize_t n = ::recv(c, buf, sizeof buf, MSG_DONTWAIT);
+        if (n > 0) can_from_clients += static_cast<std::uint64_t>(n);
+      }
+    }
+  }
+
+  void open_can_sockets() {
+    std::lock_guard lock(map_mutex);
+    for (auto& ep : can_eps)
+      if (!ep.path.empty() && ep.listen_fd < 0) ep.listen_fd = listen_frame_socket(ep.path);
+  }
+
+  void close_can_sockets() {
+    std::lock_guard lock(map_mutex);
+    for (auto& ep : can_eps) {
+      for (int c : ep.clients) ::close(c);
+      ep.clients.clear();
+      if (ep.listen_fd >= 0) {
+        ::close(ep.listen_fd);
+        ::unlink(ep.path.c_str());
+      }
+      ep.listen_fd = -1;
+    }
   }
 
   void simulate() {
     const auto t0 = started;
     while (running) {
       Clock::time_point next = Clock::time_point::max();
+      serve_can_clients();
       for (auto& l : loops) {
         const auto due = t0 + seconds(static_cast<double>(l.steps) * l.period_real_s);
         if (due <= Clock::now()) {
@@ -168,6 +305,7 @@ struct SimPlc::Impl {
     std::lock_guard lock(fault_mutex);
     const auto now = Clock::now();
     for (auto& a : faults) {
+      if (a.f.kind == FaultKind::freeze) continue;  // acts on the simulation, not on requests
       const double t = std::chrono::duration<double>(now - a.origin).count();
       if (t < a.f.start_s || t >= a.f.start_s + a.f.duration_s) continue;
       if (a.f.reg) {
@@ -230,6 +368,8 @@ struct SimPlc::Impl {
         case FaultKind::garble:
           send_garbled(fd, q, count);
           return true;
+        case FaultKind::freeze:
+          break;  // not returned by fault_for
       }
     }
     std::lock_guard lock(map_mutex);
@@ -300,10 +440,22 @@ SimPlc::SimPlc(SiteConfig site, SimPlcOptions options) : impl_(std::make_unique<
       break;
     }
   int max_holding = 0, max_input = 0;
+  const std::string where = m.site.file + ":";
   for (const auto& l : m.site.loops) {
     const BusConfig* b = m.site.find_bus(l.bus);
     const bool can = b->kind == BusKind::socketcan;
-    if (b != m.bus && !can) continue;
+    if (b != m.bus && !can) {
+      // Refused rather than left out: a recorder on this site would wait for it forever.
+      const std::string why = b->kind == BusKind::modbus_rtu
+                                  ? "the simulated PLC serves Modbus TCP only"
+                                  : "the simulated PLC serves one Modbus TCP bus, '" + m.bus->name +
+                                        "' (line " + std::to_string(m.bus->line) + ")";
+      throw std::invalid_argument(where + std::to_string(l.line) + ": loop '" + l.name +
+                                  "' is on bus '" + b->name + "' (" + to_string(b->kind) +
+                                  ", line " + std::to_string(b->line) + "); " + why +
+                                  ": move the loop to that bus, or serve bus '" + b->name +
+                                  "' with a second sim-plc from a site file of its own");
+    }
     if (l.simulate.empty())
       throw std::invalid_argument(m.site.file + ":" + std::to_string(l.line) + ": loop '" + l.name +
                                   "' has no simulate key; give it a scenario, e.g. simulate = "
@@ -316,8 +468,11 @@ SimPlc::SimPlc(SiteConfig site, SimPlcOptions options) : impl_(std::make_unique<
       throw std::invalid_argument(m.site.file + ":" + std::to_string(l.line) + ": loop '" + l.name +
                                   "': " + e.what());
     }
-    ServedLoop sl{&l, can, std::make_unique<LoopSimulator>(s.loop, l.seed),
+    ServedLoop sl{&l, b, can, std::make_unique<LoopSimulator>(s.loop, l.seed),
                   s.loop.Ts / options.speed};
+    if (can && std::none_of(m.can_eps.begin(), m.can_eps.end(),
+                            [b](const CanEndpoint& e) { return e.bus == b; }))
+      m.can_eps.push_back({b, can_unix_path(*b), -1, {}});
     m.loops.push_back(std::move(sl));
     if (!can)
       for (const auto& p : l.points) {
@@ -333,6 +488,18 @@ SimPlc::SimPlc(SiteConfig site, SimPlcOptions options) : impl_(std::make_unique<
     throw std::invalid_argument(m.site.file + ":" + std::to_string(m.bus->line) +
                                 ": the simulated PLC serves on 127.0.0.1 only; set controller = "
                                 "\"tcp://127.0.0.1:PORT\"");
+  if (!options.can_socket.empty()) {
+    if (m.can_eps.size() != 1) {
+      std::string names;
+      for (const auto& e : m.can_eps) names += (names.empty() ? "" : ", ") + e.bus->name;
+      throw std::invalid_argument(
+          m.site.file + ": a CAN socket path serves the frames of one socketcan bus; this site " +
+          "has " + std::to_string(m.can_eps.size()) + " with loops" +
+          (names.empty() ? "" : " (" + names + ")") +
+          (m.can_eps.empty() ? "" : ": give each its interface = \"unix:PATH\" instead"));
+    }
+    m.can_eps[0].path = options.can_socket;
+  }
   m.port = options.port >= 0 ? options.port : (m.bus ? m.bus->port : 0);
   m.map = modbus_mapping_new(0, 0, std::max(max_holding, 1), std::max(max_input, 1));
   if (!m.map) throw std::runtime_error("cannot allocate the register map");
@@ -346,7 +513,15 @@ SimPlc::~SimPlc() {
 void SimPlc::start() {
   Impl& m = *impl_;
   if (m.running) return;
-  if (m.bus) m.listen();
+  m.open_can_sockets();
+  if (m.bus) {
+    try {
+      m.listen();
+    } catch (...) {
+      m.close_can_sockets();
+      throw;
+    }
+  }
   m.started = Clock::now();
   {
     std::lock_guard lock(m.fault_mutex);
@@ -365,6 +540,7 @@ void SimPlc::stop() {
   if (m.sim_thread.joinable()) m.sim_thread.join();
   if (m.server_thread.joinable()) m.server_thread.join();
   m.close_all();
+  m.close_can_sockets();
 }
 
 int SimPlc::port() const {
@@ -404,6 +580,22 @@ std::uint64_t SimPlc::write_requests() const {
   std::uint64_t n = 0;
   for (int fc : {5, 6, 15, 16, 22, 23}) n += impl_->counts[static_cast<std::size_t>(fc)].load();
   return n;
+}
+
+std::vector<std::string> SimPlc::can_sockets() const {
+  std::lock_guard lock(impl_->map_mutex);
+  std::vector<std::string> out;
+  for (const auto& e : impl_->can_eps)
+    if (e.listen_fd >= 0) out.push_back(e.path);
+  return out;
+}
+
+std::uint64_t SimPlc::can_clients() const {
+  return impl_->can_accepted.load();
+}
+
+std::uint64_t SimPlc::can_bytes_from_clients() const {
+  return impl_->can_from_clients.load();
 }
 
 std::uint64_t SimPlc::connections() const {

@@ -1,7 +1,7 @@
 // SocketCAN and frame-level CAN transports. Receiving only: no transport here has a send, so
 // nothing built on them can put a frame on the bus. The decoding path (frames -> loop values) is
-// the same for a real SocketCAN socket, a socketpair carrying struct can_frame (the test mock)
-// and a candump log replay.
+// the same for a real SocketCAN socket, a socketpair carrying struct can_frame (the test mock),
+// the simulated PLC's Unix socket (interface = "unix:PATH") and a candump log replay.
 #pragma once
 
 #include <chrono>
@@ -30,6 +30,10 @@ class CanTransport {
   // The next frame within `timeout_s`; nullopt on timeout. Throws std::runtime_error when the
   // transport is broken (the peer closed, a read error).
   virtual std::optional<CanFrame> receive(double timeout_s) = 0;
+  // Whether reopen() can bring a broken transport back (the bus then retries with backoff).
+  virtual bool can_reopen() const { return false; }
+  // One attempt to re-establish a broken transport; throws std::runtime_error saying why not.
+  virtual void reopen() {}
 };
 
 // Reads struct can_frame records from a file descriptor: a SocketCAN raw socket or one end of a
@@ -43,6 +47,25 @@ class FdCanTransport final : public CanTransport {
  private:
   int fd_;
   bool own_;
+};
+
+// The simulated PLC's frame socket (`valvediag sim-plc --can-socket PATH`; interface =
+// "unix:PATH" in the site): a Unix SOCK_SEQPACKET connection carrying one struct can_frame per
+// message. Its sending side is shut down as soon as it connects, so not a byte can go back.
+// Connects in the constructor (throws std::runtime_error naming the path and what to do), and
+// reconnects through reopen() when the simulated PLC restarts.
+class UnixCanTransport final : public CanTransport {
+ public:
+  explicit UnixCanTransport(std::string path);
+  ~UnixCanTransport() override;
+  std::optional<CanFrame> receive(double timeout_s) override;
+  bool can_reopen() const override { return true; }
+  void reopen() override;
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  std::unique_ptr<FdCanTransport> fd_;
 };
 
 // Opens a raw SocketCAN socket on `interface` (receive only). Throws std::runtime_error with
@@ -73,14 +96,16 @@ class CanDecoder {
   // Updates every signal carried by this frame; returns how many it updated.
   std::size_t apply(const CanFrame& frame, std::chrono::steady_clock::time_point now);
   // Values of loop `loop` at `now`: good when its frame came within twice the loop's sample
-  // period, stale when older, comm_error when never received.
+  // period, stale when older or when the signal's value has not changed for longer than its
+  // stale_after, comm_error when never received.
   LoopValues values(std::size_t loop, std::chrono::steady_clock::time_point now) const;
   std::size_t loop_count() const { return loops_.size(); }
 
  private:
   struct Slot {
     double value = 0.0;
-    std::chrono::steady_clock::time_point when{};
+    std::chrono::steady_clock::time_point when{};     // last frame
+    std::chrono::steady_clock::time_point changed{};  // last change of the value
     bool seen = false;
   };
   std::vector<LoopConfigEntry> loops_;

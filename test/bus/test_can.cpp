@@ -3,10 +3,14 @@
 // message on a kernel without CAN; nothing is ever sent.
 #include <doctest/doctest.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 
 #include "bus_test_util.hpp"
 #include "valvediag/can_bus.hpp"
@@ -80,6 +84,34 @@ TEST_CASE("candump replay decodes the DBC signals of configs/can-site.toml") {
   CHECK(c.error.find("0x123") != std::string::npos);
 }
 
+TEST_CASE("CAN stale_after: frames that keep coming with a frozen value turn stale") {
+  SiteConfig site = load_site_config(kCanSite);
+  site.loops[0].points[static_cast<std::size_t>(PointName::pv)].stale_after_s = 0.5;
+  CanDecoder dec(site.loops);
+  auto frame = [](std::uint8_t pv_low) {
+    CanFrame c;
+    c.id = 0x123;
+    c.dlc = 8;
+    const std::uint8_t data[8] = {0xD7, 0x11, pv_low, 0x30, 0x27, 0x10, 0, 0};
+    std::copy(data, data + 8, c.data);
+    return c;
+  };
+  const auto t0 = Clock::now();
+  auto at = [&](double s) {
+    return t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+  };
+  // A frame every 100 ms (the sample period): fresh, but PV frozen from t = 0.
+  for (int i = 0; i <= 5; ++i) dec.apply(frame(0x39), at(0.1 * i));
+  CHECK(dec.values(0, at(0.5))[PointName::pv].quality == Quality::good);
+  dec.apply(frame(0x39), at(0.6));
+  LoopValues v = dec.values(0, at(0.6));
+  CHECK(v[PointName::pv].quality == Quality::stale);
+  CHECK(v[PointName::op].quality == Quality::good);  // no stale_after on op
+  CHECK(v.error.find("FIC101.pv: unchanged for 0.6 s (stale_after 0.5 s)") != std::string::npos);
+  dec.apply(frame(0x3A), at(0.7));  // it moves again
+  CHECK(dec.values(0, at(0.7))[PointName::pv].quality == Quality::good);
+}
+
 TEST_CASE("SocketCAN: a clear message when the kernel has no CAN (or no such interface)") {
   try {
     open_socketcan("vdtest0");
@@ -122,4 +154,132 @@ TEST_CASE("mock transport: simulated PLC frames over a socketpair decode to its 
   CHECK((errno == EAGAIN || errno == EWOULDBLOCK));
   ::close(sv[0]);
   ::close(sv[1]);
+}
+
+namespace {
+std::string temp_socket(const std::string& what) {
+  return (std::filesystem::temp_directory_path() /
+          ("valvediag-" + what + "-" + std::to_string(::getpid()) + ".sock"))
+      .string();
+}
+
+// A raw client of the simulated PLC's socket (not the read-only transport): it can send.
+int raw_client(const std::string& path) {
+  const int s = ::socket(AF_UNIX, SOCK_SEQPACKET, 0);
+  sockaddr_un a{};
+  a.sun_family = AF_UNIX;
+  std::memcpy(a.sun_path, path.c_str(), path.size());
+  REQUIRE(::connect(s, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  return s;
+}
+}  // namespace
+
+TEST_CASE("CAN over the simulated PLC's Unix socket: a clear error when it is missing") {
+  const std::string path = temp_socket("missing");
+  std::filesystem::remove(path);
+  try {
+    UnixCanTransport t(path);
+    FAIL("connected to a socket that does not exist");
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    CHECK(m.find("CAN socket '" + path + "' does not exist") != std::string::npos);
+    CHECK(m.find("valvediag sim-plc --config SITE --can-socket " + path) != std::string::npos);
+  }
+  { std::ofstream(path) << "not a socket"; }
+  CHECK_THROWS_WITH_AS(UnixCanTransport{path}, doctest::Contains("exists but is not a socket"),
+                       std::runtime_error);
+  SiteConfig site = load_site_config(kCanSite);
+  site.loops[0].simulate = "paper-ex1";
+  site.loops[1].simulate = "kano";
+  SimPlcOptions o{1.0, 0};
+  o.can_socket = path;
+  SimPlc plc(site, o);
+  CHECK_THROWS_WITH_AS(plc.start(), doctest::Contains("exists and is not a socket"),
+                       std::runtime_error);
+  std::filesystem::remove(path);
+}
+
+TEST_CASE(
+    "CAN over the simulated PLC's Unix socket: every client gets the frames, none sends, "
+    "reconnect after a restart") {
+  SiteConfig site = load_site_config(kCanSite);
+  site.loops[0].simulate = "paper-ex1";
+  site.loops[1].simulate = "kano";
+  const std::string path = temp_socket("can0");
+  SimPlcOptions hold{1e-6, 0};  // one step, then the values hold: exact comparison
+  hold.can_socket = path;
+  auto plc = std::make_unique<SimPlc>(site, hold);
+  plc->start();
+  REQUIRE(plc->can_sockets() == std::vector<std::string>{path});
+  // A second PLC on the same path is refused, not allowed to steal it.
+  SimPlc other(site, hold);
+  CHECK_THROWS_WITH_AS(other.start(), doctest::Contains("another simulated PLC serves"),
+                       std::runtime_error);
+
+  CanBus a(site.buses[0], site.loops, std::make_unique<UnixCanTransport>(path));
+  CanBus b(site.buses[0], site.loops, std::make_unique<UnixCanTransport>(path));
+  // Three connections: the refused PLC's probe (it found the path alive), a and b.
+  REQUIRE(test::wait_for([&] { return plc->can_clients() == 3; }, 5.0));
+  // The held PLC published its one step before the clients came: this part is about the
+  // connections; the stream comes from the second PLC below.
+  plc.reset();
+  CHECK(!std::filesystem::exists(path));  // removed on stop
+  CHECK(test::wait_for([&] { return a.stats().disconnects == 1 && !a.stats().connected; }, 5.0));
+  CHECK(a.stats().last_error.find("CAN socket '" + path + "'") != std::string::npos);
+
+  SimPlcOptions run{10.0, 0};
+  run.can_socket = path;
+  plc = std::make_unique<SimPlc>(site, run);
+  plc->start();
+  // Both recorders come back by themselves (backoff capped at 1 s) and receive the stream.
+  REQUIRE(
+      test::wait_for([&] { return a.stats().reconnects == 1 && b.stats().reconnects == 1; }, 10.0));
+  const std::uint64_t fa = a.frames(), fb = b.frames();
+  REQUIRE(test::wait_for([&] { return a.frames() >= fa + 10 && b.frames() >= fb + 10; }, 10.0));
+  for (CanBus* bus : {&a, &b}) {
+    const LoopValues v = bus->read(0);
+    INFO(v.error);
+    CHECK(v[PointName::op].quality == Quality::good);
+    CHECK(v[PointName::op].value >= 0.0);
+    CHECK(v[PointName::op].value <= 100.0);
+    CHECK(std::fabs(v[PointName::pv].value - 50.0) < 25.0);  // paper-ex1 runs around PV 50
+    CHECK(bus->stats().connected);
+  }
+  // Read only: the transports shut their sending side; a client that does send is counted.
+  CHECK(plc->can_bytes_from_clients() == 0);
+  const int raw = raw_client(path);
+  const char junk[16] = {};
+  CHECK(::send(raw, junk, sizeof junk, 0) == 16);
+  CHECK(test::wait_for([&] { return plc->can_bytes_from_clients() == 16; }, 5.0));
+  ::close(raw);
+  plc->stop();
+}
+
+TEST_CASE("CAN over the Unix socket: values equal the simulated PLC's") {
+  SiteConfig site = load_site_config(kCanSite);
+  site.loops[0].simulate = "paper-ex1";
+  site.loops[1].simulate = "kano";
+  const std::string path = temp_socket("exact");
+  SimPlcOptions o{0.2, 0};  // paper-ex1 steps every 2.5 s, kano every 5 s
+  o.can_socket = path;
+  SimPlc plc(site, o);
+  plc.start();
+  CanBus bus(site.buses[0], site.loops, std::make_unique<UnixCanTransport>(path));
+  // A frame arrives a moment after its step: compare until they agree (bounded). Wrong decoding
+  // never agrees.
+  LoopValues v;
+  LoopSample truth{};
+  CHECK(test::wait_for(
+      [&] {
+        truth = plc.latest()[0];
+        v = bus.read(0);
+        return v.error.empty() && std::fabs(v[PointName::op].value - truth.op) <= 0.005 + 1e-9 &&
+               std::fabs(v[PointName::pv].value - truth.pv) <= 0.005 + 1e-9 &&
+               std::fabs(v[PointName::sp].value - truth.sp) <= 0.005 + 1e-9;
+      },
+      15.0));
+  INFO(v.error, " op ", v[PointName::op].value, " vs ", truth.op);
+  CHECK(v[PointName::op].quality == Quality::good);
+  CHECK(bus.frames() >= 1);
+  CHECK(plc.can_bytes_from_clients() == 0);
 }

@@ -48,6 +48,20 @@ TEST_CASE("configs/site.toml: buses, loops and points as written") {
   CHECK(tic.point(PointName::sp).order == ByteOrder::cdab);
   CHECK(tic.point(PointName::mode).present);
   CHECK(!tic.point(PointName::mv).present);
+  CHECK(s.loops[0].point(PointName::pv).stale_after_s == 30.0);
+  CHECK(s.loops[0].point(PointName::sp).stale_after_s == 0.0);
+  CHECK(tic.point(PointName::pv).stale_after_s == 0.0);
+}
+
+TEST_CASE("configs/sim-can-site.toml: a Modbus loop and two CAN loops on a unix: socket") {
+  const SiteConfig s = load_site_config(kConfigs + "/sim-can-site.toml");
+  REQUIRE(s.buses.size() == 2);
+  CHECK(can_unix_path(s.buses[1]) == "/tmp/valvediag-sim-can0.sock");
+  REQUIRE(s.loops.size() == 3);
+  CHECK(s.loops[0].point(PointName::pv).stale_after_s == 1.0);
+  CHECK(s.loops[1].bus == "can0");
+  CHECK(s.loops[1].point(PointName::sp).can.frame_id == 291);
+  CHECK(s.loops[2].simulate == "deadband");
 }
 
 TEST_CASE("configs/sim-site.toml and configs/can-site.toml load") {

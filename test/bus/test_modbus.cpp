@@ -190,3 +190,66 @@ TEST_CASE("nobody listening: a clear message, no hang, no connection storm") {
   CHECK(bus.stats().connect_attempts == 1);
   CHECK(bus.stats().requests == 0);
 }
+
+TEST_CASE(
+    "stale_after: frozen registers are flagged stale, other values stay good, off by default") {
+  // paper-ex1 at 10x: a new step every 50 ms; its PV carries measurement noise, so it changes at
+  // every step unless the PLC stops updating it.
+  SiteConfig site = load_site_config(kSimSite);
+  SimPlc plc(site, SimPlcOptions{10.0, 0});
+  plc.start();
+  for (auto& b : site.buses) b.port = plc.port();
+  LoopConfigEntry watched = site.loops[0];  // FIC101
+  watched.points[static_cast<std::size_t>(PointName::pv)].stale_after_s = 0.3;
+  watched.points[static_cast<std::size_t>(PointName::op)].stale_after_s = 0.3;
+  ModbusBus bus(site.buses[0], {watched, site.loops[0]});  // with and without stale_after
+  REQUIRE(test::wait_for([&] { return bus.read(0).error.empty(); }, 5.0));
+
+  FaultConfig freeze;
+  freeze.kind = FaultKind::freeze;
+  freeze.address = 2;  // FIC101's PV: the PLC stops updating it
+  plc.add_fault(freeze);
+  LoopValues v;
+  CHECK(test::wait_for([&] { return (v = bus.read(0))[PointName::pv].quality == Quality::stale; },
+                       10.0));
+  INFO(v.error);
+  CHECK(std::isfinite(v[PointName::pv].value));  // the value is kept, flagged
+  CHECK(v[PointName::op].quality == Quality::good);
+  CHECK(v.error.find("FIC101.pv: holding register(s) 2..3 unchanged for") != std::string::npos);
+  CHECK(v.error.find("stale_after 0.3 s") != std::string::npos);
+  const LoopValues plain = bus.read(1);
+  CHECK(plain[PointName::pv].quality == Quality::good);  // no stale_after: not flagged
+  CHECK(plain[PointName::pv].value == v[PointName::pv].value);
+  // The frozen value stays put for as long as the fault lasts.
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  CHECK(bus.read(0)[PointName::pv].value == v[PointName::pv].value);
+
+  plc.clear_faults();
+  CHECK(test::wait_for([&] { return bus.read(0)[PointName::pv].quality == Quality::good; }, 10.0));
+  CHECK(bus.stats().errors == 0);  // stale is an answer, not a failed request
+  CHECK(plc.write_requests() == 0);
+}
+
+TEST_CASE("the simulated PLC refuses a loop on a Modbus bus it does not serve, naming it") {
+  const std::string loop =
+      "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
+      "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\nsimulate = \"kano\"\n";
+  const std::string two_tcp =
+      "[[bus]]\nname = \"a\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:1502\"\n"
+      "[[bus]]\nname = \"b\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:1503\"\n"
+      "[[loop]]\nname = \"A1\"\nbus = \"a\"\n" +
+      loop + "[[loop]]\nname = \"B1\"\nbus = \"b\"\n" + loop;
+  CHECK_THROWS_WITH_AS(
+      SimPlc(parse_site_config(two_tcp, "two.toml"), SimPlcOptions{1.0, 0}),
+      "two.toml:15: loop 'B1' is on bus 'b' (modbus-tcp, line 5); the simulated PLC serves one "
+      "Modbus TCP bus, 'a' (line 1): move the loop to that bus, or serve bus 'b' with a second "
+      "sim-plc from a site file of its own",
+      std::invalid_argument);
+  const std::string rtu =
+      "[[bus]]\nname = \"r\"\nprotocol = \"modbus-rtu\"\ncontroller = \"file:///dev/ttyS9\"\n"
+      "[[loop]]\nname = \"R1\"\nbus = \"r\"\n" +
+      loop;
+  CHECK_THROWS_WITH_AS(SimPlc(parse_site_config(rtu, "rtu.toml"), SimPlcOptions{1.0, 0}),
+                       doctest::Contains("the simulated PLC serves Modbus TCP only"),
+                       std::invalid_argument);
+}

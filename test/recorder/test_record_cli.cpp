@@ -209,3 +209,102 @@ TEST_CASE("a CAN site on a kernel without SocketCAN: a clear message, exit 2, no
          r.out.find("CAN interface 'can0' not found") != std::string::npos));
   CHECK(!fs::exists(db));
 }
+
+TEST_CASE("sim-plc serves CAN on a Unix socket; record reads it through interface = unix:PATH") {
+  // configs/sim-can-site.toml, moved to this directory: its socket path, its DBC, its port.
+  std::string text;
+  {
+    std::ifstream f(std::string(VALVEDIAG_CONFIG_DIR) + "/sim-can-site.toml");
+    std::stringstream ss;
+    ss << f.rdbuf();
+    text = ss.str();
+  }
+  const std::string sock = (kTmp / "simcan.sock").string();
+  auto replace = [](std::string s, const std::string& from, const std::string& to) {
+    const auto at = s.find(from);
+    REQUIRE(at != std::string::npos);
+    return s.replace(at, from.size(), to);
+  };
+  text = replace(text, "unix:/tmp/valvediag-sim-can0.sock", "unix:" + sock);
+  text = replace(text, "dbc = \"plant.dbc\"",
+                 "dbc = \"" + std::string(VALVEDIAG_CONFIG_DIR) + "/plant.dbc\"");
+  const fs::path plc_site = kTmp / "simcan-plc.toml";
+  std::ofstream(plc_site) << text;
+
+  const fs::path out = kTmp / "simcan-plc.txt";
+  fs::remove(out);
+  const pid_t pid = spawn({VALVEDIAG_BIN, "sim-plc", "--config", plc_site.string(), "--port", "0",
+                           "--speed", "10", "--duration", "8s"},
+                          out);
+  int port = 0;
+  bool serving = false;
+  REQUIRE(test::wait_for(
+      [&] {
+        std::ifstream f(out);
+        std::string line;
+        while (std::getline(f, line)) {
+          if (line.rfind("port ", 0) == 0) port = std::stoi(line.substr(5));
+          if (line == "can-socket " + sock) serving = true;
+        }
+        return port > 0 && serving;
+      },
+      10.0));
+  const fs::path rec_site = kTmp / "simcan-record.toml";
+  std::ofstream(rec_site) << replace(text, "tcp://127.0.0.1:5021",
+                                     "tcp://127.0.0.1:" + std::to_string(port));
+  const std::string db = fresh("simcan.sqlite");
+  const Result r =
+      run({"record", "--config", rec_site.string(), "--db", db, "--duration", "2s", "--quiet"});
+  INFO(r.out);
+  CHECK((r.status == 0 || r.status == 4));
+  CHECK(r.out.find("FIC101: 40 samples") != std::string::npos);
+  CHECK(r.out.find("TIC205: 20 samples") != std::string::npos);
+  CHECK(r.out.find("PIC301: 20 samples") != std::string::npos);
+  CHECK(r.out.find("bus can0: ") != std::string::npos);
+  CHECK(r.out.find(" 0 disconnects") != std::string::npos);
+  for (const char* loop : {"FIC101", "TIC205", "PIC301"}) {
+    INFO(loop);
+    const std::string id = "(SELECT id FROM loops WHERE name = '" + std::string(loop) + "')";
+    const double rows = scalar(db, "SELECT count(*) FROM samples WHERE loop_id = " + id);
+    const double good =
+        scalar(db, "SELECT count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 AND loop_id = " + id);
+    CHECK(rows >= 20);
+    CHECK(good >= rows / 2);  // all of them on a quiet machine
+    // Plausible: OP within 0..100 %, PV near the loops' operating point 50.
+    CHECK(scalar(db, "SELECT count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 AND loop_id = " +
+                         id + " AND (op < 0 OR op > 100 OR abs(pv - 50) > 25)") == 0);
+    CHECK(scalar(db, "SELECT count(DISTINCT pv) FROM samples WHERE q_pv = 0 AND loop_id = " + id) >=
+          3);  // the values move: it is the simulation, not one frame over and over
+  }
+  CHECK(scalar(db,
+               "SELECT count(*) FROM samples WHERE q_sp = 0 AND abs(sp - 50) < 10 AND "
+               "loop_id = (SELECT id FROM loops WHERE name = 'FIC101')") >= 20);
+
+  CHECK(wait_child(pid, 20.0) == 0);
+  std::ifstream f(out);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  INFO(ss.str());
+  CHECK(ss.str().find("requests by function code: 3:") != std::string::npos);
+  CHECK(ss.str().find("write requests (refused): 0") != std::string::npos);
+  CHECK(ss.str().find("CAN: 1 client(s); bytes received from them: 0") != std::string::npos);
+  CHECK(!fs::exists(sock));  // removed when sim-plc stops
+
+  // sim-plc gone: the socket is missing, record says so and what to do, before any file.
+  const std::string db2 = fresh("simcan-missing.sqlite");
+  const Result m = run({"record", "--config", rec_site.string(), "--db", db2, "--duration", "1s"});
+  CHECK(m.status == 2);
+  CHECK(m.out.find("CAN socket '" + sock + "' does not exist; start the simulated PLC first") !=
+        std::string::npos);
+  CHECK(!fs::exists(db2));
+}
+
+TEST_CASE("sim-plc never puts frames on a real CAN interface; it says how to serve CAN") {
+  const Result r = run({"sim-plc", "--config", std::string(VALVEDIAG_CONFIG_DIR) + "/can-site.toml",
+                        "--duration", "1s"});
+  INFO(r.out);
+  CHECK(r.status == 2);
+  CHECK(r.out.find("can-site.toml:9: bus 'can0' has interface \"can0\"; the simulated PLC sends "
+                   "CAN frames only on a Unix socket") != std::string::npos);
+  CHECK(r.out.find("--can-socket PATH") != std::string::npos);
+}

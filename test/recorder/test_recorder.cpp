@@ -282,3 +282,57 @@ TEST_CASE("recorded values equal the simulated loop's samples, tick for tick") {
   CHECK(compared >= 15);  // all 20 unless the machine stalled for 25 ms
   CHECK(no_writes(plc));
 }
+
+TEST_CASE("frozen registers: rows marked stale and counted with stale_after, good without it") {
+  // FIC101's PV stops being updated from 0.8 s to 2.0 s of the PLC's run; FIC101 has
+  // stale_after 0.3 s, FIC101RAW reads the same registers without it (the default: off).
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  FaultConfig freeze;
+  freeze.kind = FaultKind::freeze;
+  freeze.address = 2;
+  freeze.start_s = 0.8;
+  freeze.duration_s = 1.2;
+  plc.add_fault(freeze);
+  plc.start();
+  SiteConfig site = fast_site(plc.port());
+  site.loops.resize(1);
+  site.loops[0].points[static_cast<std::size_t>(PointName::pv)].stale_after_s = 0.3;
+  LoopConfigEntry raw = load_site_config(kSimSite).loops[0];
+  raw.name = "FIC101RAW";
+  raw.sample_period_s = kPeriod;
+  site.loops.push_back(raw);
+  const std::string db = fresh_db("frozen");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 3.0;
+  Recorder rec(site, o, make_bus);
+  std::atomic<bool> stop{false};
+  const RecorderStatus s = rec.run(stop);
+  REQUIRE(s.loops.size() == 2);
+  const LoopCounts& fic = s.loops[0];
+  const LoopCounts& plain = s.loops[1];
+  // About 1.2 s - 0.3 s = 0.9 s of 50 ms ticks stale; bounds generous for a loaded machine.
+  MESSAGE("stale rows " << fic.stale << ", good " << fic.good << ", missed " << fic.missed);
+  CHECK(fic.rows == 60);
+  CHECK(fic.stale >= 8);
+  CHECK(fic.stale <= 24);
+  CHECK(fic.good >= 25);
+  CHECK(fic.comm_error == 0);
+  CHECK(fic.gaps >= 1);
+  CHECK(plain.stale == 0);
+  CHECK(plain.good + plain.missed == 60);
+  CHECK(s.errors());
+  CHECK(s.last_error.find("FIC101: FIC101.pv: holding register(s) 2..3 unchanged for") !=
+        std::string::npos);
+  const std::string fic_id = "(SELECT id FROM loops WHERE name = 'FIC101')";
+  CHECK(scalar(db, "SELECT count(*) FROM samples WHERE q_pv = 1 AND loop_id = " + fic_id) ==
+        static_cast<double>(fic.stale));
+  // A stale row keeps its value (the last one the PLC served), unlike a comm-error row.
+  CHECK(scalar(db, "SELECT count(*) FROM samples WHERE q_pv = 1 AND pv IS NULL") == 0);
+  CHECK(scalar(db, "SELECT count(DISTINCT pv) FROM samples WHERE q_pv = 1") == 1);
+  // Stale rows lie within the frozen stretch: ticks 16..40 of the PLC's clock, which started a
+  // moment before the recorder's (so a little earlier in ticks), plus the read's own slack.
+  CHECK(scalar(db, "SELECT min(tick) FROM samples WHERE q_pv = 1") >= 16);
+  CHECK(scalar(db, "SELECT max(tick) FROM samples WHERE q_pv = 1") <= 42);
+  CHECK(no_writes(plc));
+}
