@@ -16,8 +16,8 @@ namespace valvediag {
 
 // Quality of one recorded value.
 //   good:       read at this tick
-//   stale:      the bus answered, but the value is older than its sample period (CAN frames
-//               that stopped coming)
+//   stale:      the bus answered, but the value is old: CAN frames that stopped coming, or a
+//               raw value unchanged for longer than the point's stale_after (a frozen PLC)
 //   comm_error: the request failed (timeout, exception, garbled reply, link down)
 //   missed:     the recorder could not poll at this tick (it fell behind); no request was made
 //   invalid:    the device sent a value that is not a number (float NaN or infinity)
@@ -56,8 +56,9 @@ class Bus {
   virtual const std::string& name() const = 0;
   // Reads the current values of the bus's loop number `loop` (its position in the loop list the
   // driver was built with). Never throws for communication problems: they come back as value
-  // qualities with `error` set. Blocks at most about (retries + 1) x timeout. Reconnects by
-  // itself with backoff; while the link is down it returns comm_error at once.
+  // qualities with `error` set. Blocks at most about (retries + 1) x timeout per request (twice
+  // that on Modbus RTU after a failure: the line is cleared of a late reply first). Reconnects
+  // by itself with backoff; while the link is down it returns comm_error at once.
   virtual LoopValues read(std::size_t loop) = 0;
   virtual BusStats stats() const = 0;
 };
