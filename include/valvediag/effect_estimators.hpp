@@ -108,6 +108,9 @@ class ArxEstimator {
 struct SearchParameter {
   std::string name, unit;
   double lower = 0.0, upper = 0.0;
+  // > 0: a discrete state, not searched: every evaluation takes the best of this many evenly
+  // spaced values (profiled out).
+  int profile_points = 0;
 };
 
 // What the data says about the search box: the OP range and the sample period.
@@ -116,7 +119,8 @@ struct InputRange {
 };
 
 // Search coordinates of one valve effect, bounded from the OP range R = umax - umin:
-//   stiction he: fs in [0, R], r = fd/fs in [0, 1] (keeps fs >= fd);
+//   stiction he: fs in [0, R], r = fd/fs in [0, 1] (keeps fs >= fd), and the valve's motion at
+//     the start m in {-1, 0, 1} (HeStiction's initial_motion: down, rest, up; profiled);
 //   kano, choudhury: S in [0, R], r = J/S in [0, 1];  stenman: d in [0, R];  deadband: d in [0, R]
 //     (a band wider than the OP range never lets the valve move);
 //   saturation: lower in [umin, umax - R/100], upper = lower + share (umax - lower), share in

@@ -27,9 +27,13 @@ namespace valvediag {
 // fs + fd and 2 fs before the valve moves.
 class HeStiction {
  public:
-  HeStiction(double fs, double fd);  // needs fs >= fd >= 0
-  // Rest at u0 with no residual force (He's initial condition): x = u0, u_r = 0.
-  void reset(double u0) { reset(u0, u0, 0.0); }
+  // Needs fs >= fd >= 0. `initial_motion` m in [-1, 1] is the valve's state when a record
+  // starts: u_r = m fd, x = u0 - u_r; 0 is He's rest, +1 "was moving up" (lagging the OP by
+  // fd), -1 moving down. A record cut from a running loop starts wherever the valve was, and
+  // at rest a band wider than the first OP sweep would pin the valve for the whole record.
+  HeStiction(double fs, double fd, double initial_motion = 0.0);
+  // The state at u0 that `initial_motion` says (He's rest for 0).
+  void reset(double u0) { reset(u0, u0 - initial_motion_ * fd_, initial_motion_ * fd_); }
   // Explicit memory, e.g. u_r = -fd, x0 = u0 + fd for "came down to u0 while slipping".
   void reset(double u0, double x0, double residual_force);
   double step(double u);
@@ -37,9 +41,10 @@ class HeStiction {
   double residual_force() const { return u_r_; }
   double fs() const { return fs_; }
   double fd() const { return fd_; }
+  double initial_motion() const { return initial_motion_; }
 
  private:
-  double fs_, fd_;
+  double fs_, fd_, initial_motion_;
   double u_prev_ = 0.0, x_ = 0.0, u_r_ = 0.0;
 };
 

@@ -107,15 +107,41 @@ struct Search {
     for (std::size_t i = 0; i < active.size(); ++i) za[i] = z[active[i]];
     return za;
   }
+  // Coordinates that are not searched but profiled: each evaluation takes the best of their
+  // few values (SearchParameter::profile_points), so the searched landscape is the lower
+  // envelope over the discrete states and never worse than with the state fixed.
+  std::vector<std::size_t> profiled;
+  std::vector<std::size_t> searched() const {
+    std::vector<std::size_t> v;
+    for (std::size_t i = 0; i < coords.size(); ++i)
+      if (coords[i].profile_points == 0) v.push_back(i);
+    return v;
+  }
   double cost(const double* za) {
     ++evaluations;
-    const std::vector<double> z = full(za);
-    const LinearFit f = est.fit(valve_position(z.data()));
-    const double c = f.ok ? f.sse : penalty;
+    std::vector<double> z = full(za);
+    std::size_t combos = 1;
+    for (std::size_t p : profiled) combos *= static_cast<std::size_t>(coords[p].profile_points);
+    double c = std::numeric_limits<double>::infinity();
+    std::vector<double> zc;
+    for (std::size_t k = 0; k < combos; ++k) {
+      std::size_t r = k;
+      for (std::size_t p : profiled) {
+        const auto n = static_cast<std::size_t>(coords[p].profile_points);
+        z[p] = n > 1 ? static_cast<double>(r % n) / static_cast<double>(n - 1) : 0.5;
+        r /= n;
+      }
+      const LinearFit f = est.fit(valve_position(z.data()));
+      const double ck = f.ok ? f.sse : penalty;
+      if (ck < c) {
+        c = ck;
+        zc = z;
+      }
+    }
     std::lock_guard<std::mutex> lock(mtx);
     if (c < best_cost) {
       best_cost = c;
-      best_z = z;
+      best_z = zc;
     }
     return c;
   }
@@ -541,6 +567,8 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
     s.penalty = 10.0 * den + 1.0;  // fitness about -216 %: worse than any stable fit
   }
 
+  for (std::size_t i = 0; i < s.coords.size(); ++i)
+    if (s.coords[i].profile_points > 0) s.profiled.push_back(i);
   std::vector<double> z(s.coords.size(), 0.5);
   fit.status = ModelFitStatus::Converged;
   fit.stop_reason = "no valve parameters to search";
@@ -555,17 +583,23 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
         const std::size_t k = pass % s.effects.size();
         s.active.clear();
         const std::size_t end = k + 1 < s.effects.size() ? s.offset[k + 1] : s.coords.size();
-        for (std::size_t i = s.offset[k]; i < end; ++i) s.active.push_back(i);
+        for (std::size_t i = s.offset[k]; i < end; ++i)
+          if (s.coords[i].profile_points == 0) s.active.push_back(i);
+        if (s.active.empty()) continue;
         search_space(s, opt);
         s.base = s.best_z;
       }
-      s.active.clear();
-      std::vector<double> zj = s.base;
+      s.active = s.searched();
+      std::vector<double> zj = s.restrict_to_active(s.base);
       const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations
                                                     : 60 * static_cast<int>(s.coords.size());
       outcome =
           run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, nullptr, 0.02).result;
     } else {
+      if (!s.profiled.empty()) {
+        s.base = neutral_point(s);
+        s.active = s.searched();
+      }
       outcome = search_space(s, opt);
     }
     z = s.best_z;

@@ -23,7 +23,7 @@ std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputR
   const double R = std::max(r.umax - r.umin, 1e-9);
   if (e.name == "stiction") {
     if (e.variant == "he" || e.variant.empty())
-      return {{"fs", "%", 0.0, R}, {"fd/fs", "", 0.0, 1.0}};
+      return {{"fs", "%", 0.0, R}, {"fd/fs", "", 0.0, 1.0}, {"motion at start", "", -1.0, 1.0, 3}};
     if (e.variant == "kano" || e.variant == "choudhury")
       return {{"S", "%", 0.0, R}, {"J/S", "", 0.0, 1.0}};
     if (e.variant == "stenman") return {{"d", "%", 0.0, R}};
@@ -52,7 +52,9 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
     const double ratio = std::clamp(th[1], 0.0, 1.0);
     if (e.variant == "kano") return KanoStiction(band, ratio * band);
     if (e.variant == "choudhury") return ChoudhuryStiction(band, ratio * band);
-    return HeStiction(band, ratio * band);
+    // The motion at the start is one of three states (down, rest, up): a continuous coordinate
+    // would be a flat direction for the polish and let it trade the start for the bands.
+    return HeStiction(band, ratio * band, std::round(std::clamp(th[2], -1.0, 1.0)));
   }
   if (e.name == "deadband") return Deadband(std::max(th[0], 0.0));
   if (e.name == "saturation") {
@@ -76,7 +78,9 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
 
 std::vector<NamedValue> block_parameters(const ValveEffect& block) {
   return std::visit(Overload{[](const HeStiction& b) -> std::vector<NamedValue> {
-                               return {{"fs", b.fs(), "%"}, {"fd", b.fd(), "%"}};
+                               return {{"fs", b.fs(), "%"},
+                                       {"fd", b.fd(), "%"},
+                                       {"initial_motion", b.initial_motion(), ""}};
                              },
                              [](const KanoStiction& b) -> std::vector<NamedValue> {
                                return {{"S", b.S(), "%"}, {"J", b.J(), "%"}};

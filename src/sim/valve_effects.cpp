@@ -28,9 +28,12 @@ std::string num(double v) {
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
-HeStiction::HeStiction(double fs, double fd) : fs_(fs), fd_(fd) {
+HeStiction::HeStiction(double fs, double fd, double initial_motion)
+    : fs_(fs), fd_(fd), initial_motion_(initial_motion) {
   require(std::isfinite(fs) && std::isfinite(fd) && fs >= fd && fd >= 0.0,
           "stiction (he): needs fs >= fd >= 0");
+  require(std::isfinite(initial_motion) && std::abs(initial_motion) <= 1.0,
+          "stiction (he): the initial motion must lie in [-1, 1]");
 }
 
 void HeStiction::reset(double u0, double x0, double residual_force) {
