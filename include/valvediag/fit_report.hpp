@@ -3,6 +3,7 @@
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,11 @@ struct FitContext {
   // data's own OP over its estimation window (include/valvediag/stiction_quantification.hpp);
   // without it, with reversal curves over the whole Preisach grid (region support unknown).
   const std::vector<double>* op = nullptr;
+  // With op: the output the model was fitted to (pv, or mv for a valve-position fit); the
+  // figures are then refined on the data (He's valve + linear part fitted to op, pv).
+  const std::vector<double>* pv = nullptr;
+  // Figures computed once by the caller (the refinement takes seconds); else computed here.
+  std::optional<StictionQuantification> stiction;
 };
 
 const char* method_name(FitMethod m);

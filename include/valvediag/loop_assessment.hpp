@@ -53,12 +53,14 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name,
                            const AssessOptions& opt = {}, Diagnosis* diagnosis = nullptr);
 
 // He's fs and the slip jump of a fitted model's friction, in % of the valve's OP range; NaN when
-// the model has no friction effect. `op`: the data's OP (the Preisach figures probe on it).
+// the model has no friction effect. `op`: the data's OP (the Preisach figures probe on it);
+// `pv`: the output the model was fitted to (the Preisach figures are then refined on the data;
+// empty: the probe's figures).
 struct FrictionSize {
   double band_percent = LoopAssessment::kNaN, jump_percent = LoopAssessment::kNaN;
 };
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
-                           const OpRange& range = {});
+                           const std::vector<double>& pv, const OpRange& range = {});
 
 // Severity from verdict, stiction size and oscillation: stiction 6, deadband 5,
 // other-nonlinearity 3, no-valve-problem 1, not-enough-data 0, error -1; + 1 when the loop

@@ -69,7 +69,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
         a->autoclimb ? diagnose_auto(d.op, d.pv, Ts, spec, o) : diagnose(d.op, d.pv, Ts, spec, o);
     std::cout << format_diagnosis(r, d.t);
     // The stiction size the sweep reports, for one loop without a site config.
-    const FrictionSize fr = friction_size(r.last().fit, d.op);
+    const FrictionSize fr = friction_size(r.last().fit, d.op, d.pv);
     if (std::isfinite(fr.band_percent))
       std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%\n",
                   fr.band_percent, fr.jump_percent);

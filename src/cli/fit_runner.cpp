@@ -27,11 +27,13 @@ FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& outpu
   }
   ctx.time = &d.t;
   ctx.op = &d.op;  // stiction figures probe the identified valve on the data's own OP
+  ctx.pv = &checked.pv;  // ... and are refined on the data
   ctx.data_name = d.source;
   ctx.samples = d.size();
   ctx.sample_period = d.sample_period();
   ctx.output_name = output;
   ctx.method = method_name(fo.method);
+  if (run.result.status == IdentificationStatus::Ok) ctx.stiction = fit_stiction(run.result, ctx);
   run.summary = format_summary(run.result, ctx);
   run.json = to_json(run.result, ctx);
   return run;

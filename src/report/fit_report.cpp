@@ -200,10 +200,15 @@ nlohmann::json stiction_json(const StictionQuantification& q) {
 }  // namespace
 
 StictionQuantification fit_stiction(const IdentificationResult& r, const FitContext& ctx) {
+  if (ctx.stiction) return *ctx.stiction;
   if (!ctx.op) return quantify_stiction(r.model);
   const std::size_t end = std::min(ctx.op->size(), r.estimation_end);
-  const std::vector<double> op(ctx.op->begin(), ctx.op->begin() + static_cast<std::ptrdiff_t>(end));
-  return quantify_stiction(r.model, op);
+  const auto cut = [end](const std::vector<double>& v) {
+    return std::vector<double>(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(end));
+  };
+  if (ctx.pv && ctx.pv->size() == ctx.op->size())
+    return quantify_stiction(r.model, cut(*ctx.op), cut(*ctx.pv));
+  return quantify_stiction(r.model, cut(*ctx.op));
 }
 
 std::string format_summary(const IdentificationResult& r, const FitContext& ctx) {

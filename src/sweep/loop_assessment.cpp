@@ -24,11 +24,13 @@ double param(const std::vector<NamedValue>& p, const char* name) {
 // Stenman (d: band, jump d), deadband (d, no jump); a Preisach valve through He's figures fitted
 // to its response on the data's own OP (stiction_quantification.hpp).
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
-                           const OpRange& range) {
+                           const std::vector<double>& pv, const OpRange& range) {
   const double width = std::max(range.hi - range.lo, 1e-12);
   FrictionSize a;
   if (fit.preisach) {
-    const StictionQuantification q = quantify_stiction(*fit.preisach, op);
+    const StictionQuantification q = pv.size() == op.size()
+                                         ? quantify_stiction(*fit.preisach, op, pv)
+                                         : quantify_stiction(*fit.preisach, op);
     if (q.valid && q.stiction) {
       a.band_percent = q.overall.fs_percent * 100.0 / width;
       a.jump_percent = q.overall.jump_percent * 100.0 / width;
@@ -131,7 +133,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
     a.first_missing = dg.steps.front().findings.front().effect;
   }
-  const FrictionSize fr = friction_size(best, d.op, opt.range);
+  const FrictionSize fr = friction_size(best, d.op, d.pv, opt.range);
   a.stiction_percent = fr.band_percent;
   a.slip_jump_percent = fr.jump_percent;
   a.reason = dg.conclusion;
