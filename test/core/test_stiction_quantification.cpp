@@ -208,6 +208,11 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
       {"so", 8.0, 1.5, 0.2, 24},     {"int", 5.0, 2.0, 0.1, 25},    {"so", 3.0, 0.5, 0.1, 26},
       {"fopdt", 2.0, 1.0, 0.05, 27},
   };
+#ifdef VALVEDIAG_SANITIZED
+  const std::size_t stride = 6;  // a sample under the sanitizers; the figures need every case
+#else
+  const std::size_t stride = 1;
+#endif
   const auto start = std::chrono::steady_clock::now();
   int ok_count = 0, preisach_ok = 0;
   std::printf(
@@ -215,7 +220,8 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
       "then refined on the data\n");
   std::printf("%-4s %-5s %5s %3s %5s | %5s %5s | %5s %5s | %5s %5s | %5s %s\n", "case", "loop",
               "noise", "L", "delta", "fs", "fd", "P fs^", "P fd^", "fs^", "fd^", "fit", "ok");
-  for (std::size_t i = 0; i < cases.size(); ++i) {
+  std::size_t run = 0;
+  for (std::size_t i = 0; i < cases.size(); i += stride, ++run) {
     const Case& c = cases[i];
     const LoopData d = run_scenario(case_loop(c), c.seed, 0);
     const IdentificationResult r = identify(d.op, d.pv, case_fit_options(c.loop));
@@ -233,11 +239,11 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
   const double elapsed =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf("%d of %zu within 20 %% or 0.5 %% of travel (Preisach probe alone: %d) (%.1f s)\n",
-              ok_count, cases.size(), preisach_ok, elapsed);
+              ok_count, run, preisach_ok, elapsed);
   // Measured (Release): 19 of 19 refined; the Preisach probe alone 10 of 19 (5 of the first 12):
   // its band is known to a grid step only and a fitted lattice's weights shorten it, even fitted
   // to the noise-free valve position. The goal is 90 %; the floor is the measurement.
-  CHECK(ok_count >= 19);
+  CHECK(ok_count >= static_cast<int>(run));  // 19 of 19 in Release
 }
 
 TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more") {

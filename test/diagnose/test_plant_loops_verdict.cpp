@@ -131,6 +131,12 @@ VerdictOptions fit_thresholds(const std::vector<const Row*>& train) {
   return best;
 }
 
+#ifdef VALVEDIAG_SANITIZED
+constexpr bool kSanitized = true;  // every 5th file: memory checks, not the accuracy figures
+#else
+constexpr bool kSanitized = false;
+#endif
+
 std::vector<Row> run_all() {
   std::vector<Row> rows;
   const fs::path root = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops";
@@ -139,6 +145,11 @@ std::vector<Row> run_all() {
     for (const auto& e : fs::directory_iterator(root / label))
       if (e.is_regular_file()) files.push_back(e.path());
     std::sort(files.begin(), files.end());
+    if (kSanitized) {
+      std::vector<fs::path> sample;
+      for (std::size_t i = 0; i < files.size(); i += 5) sample.push_back(files[i]);
+      files = sample;
+    }
     for (const auto& p : files) {
       Row r;
       r.file = p.filename().string();
@@ -162,6 +173,11 @@ TEST_CASE("the verdict on real plant loops against the provider's labels (confus
   const auto t0 = std::chrono::steady_clock::now();
   const std::vector<Row> rows = run_all();
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (kSanitized) {  // the sample ran through every path; the figures need all 41 files
+    CHECK(rows.size() == 9);
+    for (const Row& r : rows) CHECK(!r.v.verdict.empty());
+    return;
+  }
   REQUIRE(rows.size() == 41);
 
   std::printf("\n%-46s %-11s %-18s %6s %6s %6s %6s %5s\n", "file", "label", "verdict", "gain",
@@ -252,15 +268,16 @@ TEST_CASE("the verdict on real plant loops against the provider's labels (confus
               100 * split.balanced(), 100 * split.false_sticky());
   std::printf("runtime: %.1f s for 41 files\n", total);
 
-  // What is measured (issue 5 aims at >= 85 % and <= 10 %; not reached: 6 of 18 sticky loops
-  // found, none of the 23 clean ones called sticky). The thresholds are the defaults
-  // (10 points, 25 %); the leave-one-out choice of them on the other files must do as well.
-  CHECK(all.tp >= 6);
+  // What is measured (issue 5 aims at >= 85 % and <= 10 %; not reached: 9 of 18 sticky loops
+  // found, none of the 23 clean ones called sticky, 75 %). The thresholds are the defaults
+  // (10 points, 25 %); the choice of them on the other files must do nearly as well.
+  CHECK(all.tp >= 9);
   CHECK(all.fp == 0);
-  CHECK(all.balanced() >= 0.66);
+  CHECK(all.balanced() >= 0.74);
   CHECK(all.false_sticky() <= 0.0);
-  CHECK(loo_loop.balanced() >= 0.66);
-  CHECK(split.balanced() >= 0.66);
+  CHECK(loo_loop.balanced() >= 0.70);
+  CHECK(loo_loop.false_sticky() <= 0.1);
+  CHECK(split.balanced() >= 0.74);
   // The dead-PV export and the 126-sample one are not usable.
   CHECK(table["stiction"]["not-enough-data"] == 1);
   CHECK(table["no-stiction"]["not-enough-data"] == 1);
