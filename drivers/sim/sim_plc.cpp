@@ -528,7 +528,10 @@ void SimPlc::start() {
     for (auto& f : m.faults)
       if (f.origin == Clock::time_point{}) f.origin = m.started;
   }
-  // Values exist before the first request: publish step 0 at once.
+  // Values exist before the first request: step 0 is published here, before the server thread
+  // can answer (from the simulation thread a first request could read the zeroed map).
+  for (auto& l : m.loops)
+    if (l.steps == 0) m.publish(l, l.sim->step());
   m.running = true;
   m.sim_thread = std::thread([&m] { m.simulate(); });
   if (m.bus) m.server_thread = std::thread([&m] { m.serve(); });
