@@ -26,7 +26,7 @@ FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& outpu
     ctx.residual = &where;
   }
   ctx.time = &d.t;
-  ctx.op = &d.op;  // stiction figures probe the identified valve on the data's own OP
+  ctx.op = &d.op;        // stiction figures probe the identified valve on the data's own OP
   ctx.pv = &checked.pv;  // ... and are refined on the data
   ctx.data_name = d.source;
   ctx.samples = d.size();
