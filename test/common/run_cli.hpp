@@ -58,7 +58,10 @@ struct CliResult {
 inline CliResult run_cli(const std::string& bin, const std::vector<std::string>& args,
                          const std::filesystem::path& tmp, double limit_s = 60.0) {
   static int n = 0;
-  const std::filesystem::path out = tmp / ("cli_out_" + std::to_string(++n) + ".txt");
+  // The process id keeps test programs that ctest runs side by side (one binary, several
+  // entries) off each other's files.
+  const std::filesystem::path out =
+      tmp / ("cli_out_" + std::to_string(::getpid()) + "_" + std::to_string(++n) + ".txt");
   std::vector<std::string> full{bin};
   full.insert(full.end(), args.begin(), args.end());
   const int st = wait_child(spawn(full, out), limit_s);
