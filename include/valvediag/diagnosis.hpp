@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "valvediag/limit_cycle.hpp"
 #include "valvediag/model_fit.hpp"
 #include "valvediag/model_spec.hpp"
 #include "valvediag/residual_analysis.hpp"
@@ -53,6 +54,10 @@ struct DiagnosisStep {
 struct Diagnosis {
   std::vector<DiagnosisStep> steps;  // one without --auto; the climbed ladder with it
   std::string conclusion;            // what is left (noise level, unexplained intervals)
+  // The limit-cycle test (limit_cycle.hpp) with the first step's model: in an oscillating loop,
+  // the evidence of a stick-slip cycle that trial fits can miss (a slip exactly at each OP
+  // reversal leaves a fitted friction threshold no margin).
+  LimitCycle limit_cycle;
   const DiagnosisStep& last() const { return steps.back(); }
 };
 

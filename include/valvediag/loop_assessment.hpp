@@ -61,6 +61,11 @@ struct FrictionSize {
 };
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
                            const std::vector<double>& pv, const OpRange& range = {});
+// The same for a diagnosis's final model; when the verdict rests on a stick-slip limit cycle
+// and the model has no friction effect, the band is the cycle's apparent stiction (the OP-PV
+// ellipse's width, limit_cycle.hpp) and the jump is unknown (NaN).
+FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
+                           const std::vector<double>& pv, const OpRange& range = {});
 
 // Severity from verdict, stiction size and oscillation: stiction 6, deadband 5,
 // other-nonlinearity 3, no-valve-problem 1, not-enough-data 0, error -1; + 1 when the loop

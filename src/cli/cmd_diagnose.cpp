@@ -69,10 +69,13 @@ void add_diagnose(CLI::App& app, int& exit_code) {
         a->autoclimb ? diagnose_auto(d.op, d.pv, Ts, spec, o) : diagnose(d.op, d.pv, Ts, spec, o);
     std::cout << format_diagnosis(r, d.t);
     // The stiction size the sweep reports, for one loop without a site config.
-    const FrictionSize fr = friction_size(r.last().fit, d.op, d.pv);
-    if (std::isfinite(fr.band_percent))
+    const FrictionSize fr = friction_size(r, d.op, d.pv);
+    if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent))
       std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%\n",
                   fr.band_percent, fr.jump_percent);
+    else if (std::isfinite(fr.band_percent))
+      std::printf("stiction:  %.2f %% of valve travel (apparent, from the limit cycle)\n",
+                  fr.band_percent);
     if (!a->json.empty()) {
       nlohmann::json j = diagnosis_json(r, d.t);
       auto number = [](double v) {

@@ -365,6 +365,41 @@ std::string conclusion_of(const DiagnosisStep& s, const std::vector<double>& t_a
   return c + ".";
 }
 
+// The limit-cycle test with the best model driven by OP alone: the step of highest estimation
+// fitness without `disturbance` (a load estimated from PV could carry an outside oscillation and
+// pass it for OP's). The process integrates when a model has `integrator` or the first step's
+// diagnosis supports adding it.
+LimitCycle limit_cycle_of(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                          const Diagnosis& d) {
+  bool integrating = false;
+  const ModelFit* driven = nullptr;
+  for (const auto& s : d.steps) {
+    integrating = integrating || s.fit.spec.has("integrator");
+    if (s.fit.spec.has("disturbance") || !std::isfinite(s.fit.fitness_percent)) continue;
+    if (!driven || s.fit.fitness_percent > driven->fitness_percent) driven = &s.fit;
+  }
+  // The trial fits from the first step: the best with memory (stiction, preisach) and the best
+  // without; the smaller of each trial's estimation and held-out gains.
+  TrialEvidence trials;
+  trials.start_fitness = d.steps.front().fit.fitness_percent;
+  for (const auto& f : d.steps.front().findings) {
+    if (f.effect == "integrator" && f.supported) integrating = true;
+    const bool memory = f.effect == "stiction" || f.effect == "preisach";
+    double& best = memory ? trials.memory_gain : trials.rival_gain;
+    if (std::isfinite(f.gain_percent) && !(best >= f.gain_percent)) {
+      best = f.gain_percent;
+      if (!memory) trials.rival = f.effect;
+    }
+  }
+  return limit_cycle_test(u, y, driven ? driven->y_sim : std::vector<double>{}, Ts, integrating,
+                          trials);
+}
+
+std::string with_limit_cycle(std::string conclusion, const LimitCycle& c) {
+  if (c.stick_slip) conclusion += " Limit cycle: " + c.summary + ".";
+  return conclusion;
+}
+
 }  // namespace
 
 Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, double Ts,
@@ -373,10 +408,12 @@ Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, d
   d.steps.push_back(evaluate(u, y, Ts, model, opt));
   const auto& f = d.last().findings;
   const bool supported = !f.empty() && f.front().supported;
-  d.conclusion =
+  d.limit_cycle = limit_cycle_of(u, y, Ts, d);
+  d.conclusion = with_limit_cycle(
       conclusion_of(d.last(), {}, Ts,
                     supported ? "The most likely missing effect is `" + f.front().effect + "`."
-                              : "No candidate effect improves the model by a meaningful margin.");
+                              : "No candidate effect improves the model by a meaningful margin."),
+      d.limit_cycle);
   return d;
 }
 
@@ -406,7 +443,8 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
     }
     model = best.trial_spec;
   }
-  d.conclusion = conclusion_of(d.last(), {}, Ts, why);
+  d.limit_cycle = limit_cycle_of(u, y, Ts, d);
+  d.conclusion = with_limit_cycle(conclusion_of(d.last(), {}, Ts, why), d.limit_cycle);
   return d;
 }
 

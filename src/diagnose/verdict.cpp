@@ -21,6 +21,10 @@ std::string verdict(const Diagnosis& d) {
   }
   if (m.has("stiction") || m.has("preisach")) return "stiction";
   if (m.has("deadband")) return "deadband";
+  // A stick-slip limit cycle outweighs a static nonlinearity or none: in a sustained cycle the
+  // valve slips at each OP reversal, which leaves a fitted friction threshold no margin, while
+  // a static curve cannot make the loop cycle by itself.
+  if (d.limit_cycle.stick_slip) return "stiction";
   if (m.has("saturation") || m.has("characteristic") || m.has("actuator-lag"))
     return "other-nonlinearity";
   return "no-valve-problem";

@@ -87,6 +87,7 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
     for (const auto& g : f.regions)
       o << "           " << g.label << " carries " << num(100 * g.share, 0) << " % of the error\n";
   }
+  if (d.limit_cycle.oscillating) o << "limit cycle: " << d.limit_cycle.summary << "\n";
   o << "verdict:   " << verdict(d) << "\n";
   o << d.conclusion << "\n";
   return o.str();
@@ -109,6 +110,15 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) 
   }
   j["effects"] = eff;
   j["verdict"] = verdict(d);
+  const LimitCycle& c = d.limit_cycle;
+  j["limit_cycle"] = {{"oscillating", c.oscillating},
+                      {"period_s", num_json(c.oscillating ? c.period_s : LimitCycle::kNaN)},
+                      {"phase_deg", num_json(c.phase_deg)},
+                      {"model_share", num_json(c.model_share)},
+                      {"integrating", c.integrating},
+                      {"stick_slip", c.stick_slip},
+                      {"apparent_band", num_json(c.apparent_band)},
+                      {"summary", c.summary}};
   for (const auto& e : s.fit.effects)
     if (e.name == "stiction") {
       json st = json::object();

@@ -63,6 +63,14 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
   return a;
 }
 
+FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
+                           const std::vector<double>& pv, const OpRange& range) {
+  FrictionSize a = friction_size(d.last().fit, op, pv, range);
+  if (std::isnan(a.band_percent) && verdict(d) == "stiction" && d.limit_cycle.stick_slip)
+    a.band_percent = 100.0 * d.limit_cycle.apparent_band / std::max(range.hi - range.lo, 1e-12);
+  return a;
+}
+
 double severity(const LoopAssessment& a) {
   double s = 0.0;
   if (a.verdict == "stiction")
@@ -133,7 +141,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
     a.first_missing = dg.steps.front().findings.front().effect;
   }
-  const FrictionSize fr = friction_size(best, d.op, d.pv, opt.range);
+  const FrictionSize fr = friction_size(dg, d.op, d.pv, opt.range);
   a.stiction_percent = fr.band_percent;
   a.slip_jump_percent = fr.jump_percent;
   a.reason = dg.conclusion;

@@ -2,51 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
-#include <complex>
 #include <numeric>
-#include <unsupported/Eigen/FFT>
 
 #include "valvediag/identifiability.hpp"
+#include "valvediag/limit_cycle.hpp"
 
 namespace valvediag {
 
 namespace {
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
-
-// Normalised autocorrelation for lags 0..N-1 through one FFT (zero-padded: no wrap-around).
-std::vector<double> autocorrelation(const std::vector<double>& x) {
-  const std::size_t N = x.size();
-  std::size_t n = 1;
-  while (n < 2 * N) n <<= 1;
-  std::vector<double> padded(n, 0.0);
-  std::copy(x.begin(), x.end(), padded.begin());
-  Eigen::FFT<double> fft;
-  std::vector<std::complex<double>> X;
-  fft.fwd(X, padded);
-  for (auto& c : X) c = std::norm(c);
-  std::vector<double> r;
-  fft.inv(r, X);
-  r.resize(N);
-  const double r0 = r[0];
-  if (!(r0 > 0)) return {};
-  for (auto& v : r) v /= r0;
-  return r;
-}
-
-// OP noise: the spread of second differences of white noise is sqrt(6) sigma; the median keeps
-// real moves (steps, ramps) out of it.
-double noise_level(const std::vector<double>& u) {
-  if (u.size() < 3) return 0.0;
-  std::vector<double> d2(u.size() - 2);
-  for (std::size_t k = 0; k + 2 < u.size(); ++k) d2[k] = std::abs(u[k + 2] - 2 * u[k + 1] + u[k]);
-  return 1.4826 * median(std::move(d2)) / std::sqrt(6.0);
-}
 
 struct TurningPoints {
   int reversals = 0;
@@ -93,7 +56,7 @@ LoopHealth loop_health(const LoopData& d, const OpRange& range) {
   const double width = std::max(range.hi - range.lo, 1e-12);
 
   // OP figures.
-  h.op_noise = noise_level(d.op);
+  h.op_noise = noise_sigma(d.op);
   const auto [mn, mx] = std::minmax_element(d.op.begin(), d.op.end());
   h.op_span_percent = 100.0 * (*mx - *mn) / width;
   const double band = std::max(0.001 * width, 3.0 * h.op_noise);
@@ -118,31 +81,10 @@ LoopHealth loop_health(const LoopData& d, const OpRange& range) {
   }
   var /= static_cast<double>(e.size());
   h.amplitude = std::sqrt(2.0 * var);  // a sine's amplitude from its RMS
-  const std::vector<double> r = autocorrelation(e);
-  if (r.empty()) return h;
-  // Zero crossings of the ACF (linear interpolation), up to 11 of them, within half the record
-  // (beyond it the ACF rests on too few products).
-  std::vector<double> z;
-  for (std::size_t k = 1; k < r.size() / 2 && z.size() < 11; ++k)
-    if ((r[k - 1] > 0) != (r[k] > 0))
-      z.push_back(static_cast<double>(k - 1) + r[k - 1] / (r[k - 1] - r[k]));
-  if (z.size() < 4) return h;  // fewer than 3 half-periods: no evidence of a regular period
-  std::vector<double> half(z.size() - 1);
-  for (std::size_t i = 0; i + 1 < z.size(); ++i) half[i] = z[i + 1] - z[i];
-  const double hm =
-      std::accumulate(half.begin(), half.end(), 0.0) / static_cast<double>(half.size());
-  double hs = 0.0;
-  for (double v : half) hs += (v - hm) * (v - hm);
-  hs = std::sqrt(hs / static_cast<double>(half.size() - 1));
-  h.regularity = hs > 0 ? hm / (3.0 * hs) : 100.0;
-  h.regularity = std::min(h.regularity, 100.0);
-  // The ACF's first positive peak after one period: how much of the error the oscillation is.
-  const std::size_t k1 = static_cast<std::size_t>(z[1]), k2 = static_cast<std::size_t>(z[2]) + 1;
-  double peak = 0.0;
-  for (std::size_t k = k1; k <= k2 && k < r.size(); ++k) peak = std::max(peak, r[k]);
-  h.period_s = 2.0 * hm * Ts;
-  h.oscillating = h.regularity > 1.0 && peak > 0.2 && hm >= 2.0;
-  if (!h.oscillating) h.period_s = 0.0;
+  const Oscillation osc = detect_oscillation(e);
+  h.regularity = osc.regularity;
+  h.oscillating = osc.oscillating;
+  h.period_s = osc.period_samples * Ts;
   return h;
 }
 
