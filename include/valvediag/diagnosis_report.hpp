@@ -12,6 +12,10 @@ namespace valvediag {
 
 std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t);
 nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t);
+// The limit-cycle test's figures (limit_cycle.hpp) as `diagnose --json` and the sweep write them,
+// and back (missing keys keep their defaults).
+nlohmann::json limit_cycle_json(const LimitCycle& c);
+LimitCycle limit_cycle_from_json(const nlohmann::json& j);
 std::string format_ladder(const std::vector<HistoryEntry>& entries);
 
 // A fit of a composable model (fit --model/--add/--remove): summary and JSON.

@@ -93,6 +93,34 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
   return o.str();
 }
 
+nlohmann::json limit_cycle_json(const LimitCycle& c) {
+  return {{"oscillating", c.oscillating},
+          {"period_s", num_json(c.oscillating ? c.period_s : LimitCycle::kNaN)},
+          {"phase_deg", num_json(c.phase_deg)},
+          {"model_share", num_json(c.model_share)},
+          {"integrating", c.integrating},
+          {"stick_slip", c.stick_slip},
+          {"apparent_band", num_json(c.apparent_band)},
+          {"summary", c.summary}};
+}
+
+LimitCycle limit_cycle_from_json(const nlohmann::json& j) {
+  LimitCycle c;
+  if (!j.is_object()) return c;
+  auto num = [&j](const char* k) {
+    return j.contains(k) && j[k].is_number() ? j[k].get<double>() : LimitCycle::kNaN;
+  };
+  c.oscillating = j.value("oscillating", false);
+  c.period_s = c.oscillating ? num("period_s") : 0.0;
+  c.phase_deg = num("phase_deg");
+  c.model_share = num("model_share");
+  c.integrating = j.value("integrating", false);
+  c.stick_slip = j.value("stick_slip", false);
+  c.apparent_band = num("apparent_band");
+  c.summary = j.value("summary", std::string());
+  return c;
+}
+
 nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) {
   using nlohmann::json;
   const auto& s = d.last();
@@ -110,15 +138,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) 
   }
   j["effects"] = eff;
   j["verdict"] = verdict(d);
-  const LimitCycle& c = d.limit_cycle;
-  j["limit_cycle"] = {{"oscillating", c.oscillating},
-                      {"period_s", num_json(c.oscillating ? c.period_s : LimitCycle::kNaN)},
-                      {"phase_deg", num_json(c.phase_deg)},
-                      {"model_share", num_json(c.model_share)},
-                      {"integrating", c.integrating},
-                      {"stick_slip", c.stick_slip},
-                      {"apparent_band", num_json(c.apparent_band)},
-                      {"summary", c.summary}};
+  j["limit_cycle"] = limit_cycle_json(d.limit_cycle);
   for (const auto& e : s.fit.effects)
     if (e.name == "stiction") {
       json st = json::object();

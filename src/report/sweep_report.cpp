@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "number_format.hpp"
+#include "valvediag/diagnosis_report.hpp"
 #include "valvediag/html_report.hpp"
 
 namespace valvediag {
@@ -74,6 +75,7 @@ json assessment_json(const LoopAssessment& a) {
                  {"time_at_limits_percent", number(h.time_at_limits_percent)},
                  {"op_noise", number(h.op_noise)},
                  {"op_span_percent", number(h.op_span_percent)}};
+  j["limit_cycle"] = limit_cycle_json(a.limit_cycle);
   j["elapsed_s"] = a.elapsed_s;
   j["error"] = a.error;
   j["report"] = a.report;
@@ -115,6 +117,7 @@ LoopAssessment assessment_from_json(const json& j) {
     o.op_noise = number_of(h, "op_noise");
     o.op_span_percent = number_of(h, "op_span_percent");
   }
+  if (j.contains("limit_cycle")) a.limit_cycle = limit_cycle_from_json(j["limit_cycle"]);
   a.elapsed_s = number_of(j, "elapsed_s");
   a.error = text_of(j, "error");
   a.report = text_of(j, "report");

@@ -129,6 +129,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   }
   const ModelFit& best = dg.last().fit;
   a.verdict = verdict(dg);
+  a.limit_cycle = dg.limit_cycle;
   a.model = to_string(best.spec);
   a.fitness_percent = best.fitness_percent;
   a.validation_fitness_percent = best.validation_fitness_percent;

@@ -191,6 +191,9 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   for (const char* k :
        {"model", "fitness_percent", "validation_fitness_percent", "findings", "verdict"})
     CHECK_MESSAGE(j.contains(k), k);
+  for (const char* k : {"oscillating", "period_s", "phase_deg", "model_share", "integrating",
+                        "stick_slip", "apparent_band", "summary"})
+    CHECK_MESSAGE(j["limit_cycle"].contains(k), k);
   CHECK(j["model"] == "stiction");
   CHECK(j["verdict"] == "stiction");
   CHECK(j["stiction"]["fs_percent"].get<double>() == doctest::Approx(8.4).epsilon(0.2));

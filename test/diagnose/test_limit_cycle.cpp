@@ -3,6 +3,7 @@
 // oscillation that comes from outside the loop.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -12,6 +13,7 @@
 #include "valvediag/limit_cycle.hpp"
 #include "valvediag/mat_reader.hpp"
 #include "valvediag/scenarios.hpp"
+#include "valvediag/valve_effects.hpp"
 #include "valvediag/verdict.hpp"
 
 using namespace valvediag;
@@ -131,6 +133,8 @@ TEST_CASE("the test does not decide without a cycle, for an integrating process,
 struct MiniLoop {
   double K = 1.2, tau = 40.0, theta = 4.0, kc = 0.8, ti = 40.0, Ts = 1.0;
   double load_amp = 0.0, load_period = 600.0, noise = 0.02, load_noise = 0.0;
+  double fs = 0.0, fd = 0.0;  // He stiction of the valve (0: linear)
+  double sp_offset = 0.0;     // set point off the start, in valve % (K times this in PV)
   std::vector<double> u, y;
   void run(std::size_t N, unsigned seed) {
     std::mt19937_64 rng(seed);
@@ -139,7 +143,9 @@ struct MiniLoop {
     const auto d = static_cast<std::size_t>(theta / Ts);
     std::vector<double> x(N + d + 1, 50.0);
     double yp = K * 50.0, op = 50.0, e_prev = 0.0, ln = 0.0;
-    const double sp = K * 50.0;
+    const double sp = K * (50.0 + sp_offset);
+    HeStiction valve(fs, fd);
+    valve.reset(50.0, 50.0, 0.0);
     u.clear();
     y.clear();
     for (std::size_t k = 0; k < N; ++k) {
@@ -150,12 +156,41 @@ struct MiniLoop {
       const double e = sp - ym;
       op = std::clamp(op + kc * (e - e_prev) + kc * Ts / ti * e, 0.0, 100.0);
       e_prev = e;
-      x[k + d] = op;
+      x[k + d] = fs > 0 ? valve.step(op) : op;
       u.push_back(op);
       y.push_back(ym);
     }
   }
 };
+
+TEST_CASE("a sticky valve that makes its loop cycle is found, with its band") {
+  // A flow-like loop and a slower one; the set point lies off the point where the valve lands
+  // after a slip (else the first slip would settle the loop).
+  struct Case {
+    double tau, theta, kc, ti;
+  };
+  for (const Case& k : {Case{10, 2, 0.3, 20}, Case{40, 4, 0.5, 60}})
+    for (unsigned seed : {1u, 2u}) {
+      CAPTURE(k.tau);
+      CAPTURE(seed);
+      MiniLoop m;
+      m.tau = k.tau;
+      m.theta = k.theta;
+      m.kc = k.kc;
+      m.ti = k.ti;
+      m.fs = 3.0;
+      m.fd = 1.0;
+      m.sp_offset = 2.7;
+      m.run(3000, seed);
+      const Diagnosis dg = diagnose(m.u, m.y, m.Ts, parse_model_spec("linear"));
+      std::printf("He fs 3 fd 1, tau %2.0f  %s\n", k.tau, dg.limit_cycle.summary.c_str());
+      CHECK(dg.limit_cycle.oscillating);
+      CHECK(dg.limit_cycle.stick_slip);
+      CHECK(verdict(dg) == "stiction");
+      // The apparent band (the OP-PV ellipse's width) is of the size of fs.
+      CHECK(dg.limit_cycle.apparent_band == doctest::Approx(3.0).epsilon(0.2));
+    }
+}
 
 TEST_CASE("an outside cycle and the linear scenarios are not stick-slip") {
   SUBCASE("a slow outside oscillation that the controller compensates") {

@@ -63,6 +63,13 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   a.health.oscillating = true;
   a.health.period_s = 120;
   a.health.op_reversals_per_hour = 60;
+  a.limit_cycle.oscillating = true;
+  a.limit_cycle.period_s = 118;
+  a.limit_cycle.phase_deg = -97;
+  a.limit_cycle.model_share = 0.8;
+  a.limit_cycle.stick_slip = true;
+  a.limit_cycle.apparent_band = 2.4;
+  a.limit_cycle.summary = "PV oscillates";
   a.severity = severity(a);
   const LoopAssessment b = assessment_from_json(nlohmann::json::parse(assessment_json(a).dump()));
   CHECK(b.loop == a.loop);
@@ -72,6 +79,14 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(b.ladder[1].validation_fitness_percent == 88.0);
   CHECK(b.health.oscillating);
   CHECK(b.health.period_s == 120);
+  CHECK(b.limit_cycle.oscillating);
+  CHECK(b.limit_cycle.period_s == 118);
+  CHECK(b.limit_cycle.phase_deg == -97);
+  CHECK(b.limit_cycle.model_share == 0.8);
+  CHECK(b.limit_cycle.stick_slip);
+  CHECK_FALSE(b.limit_cycle.integrating);
+  CHECK(b.limit_cycle.apparent_band == 2.4);
+  CHECK(b.limit_cycle.summary == "PV oscillates");
   CHECK(b.severity == doctest::Approx(6 + 1 + 1.25));
 
   LoopAssessment n;  // NaN figures travel as null and come back NaN
