@@ -160,6 +160,31 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
   CHECK(run({"sweep-merge", bad}).status == 2);
 }
 
+// Issue 5: the reactor cooling-water loop of the Tennessee Eastman benchmark, normal operation and
+// the valve-sticking fault IDV(14), by matrix columns (OP = XMV(10), PV = XMEAS(21)).
+TEST_CASE("sweep over the Tennessee Eastman runs: the sticking fault is stiction, normal is not") {
+  const std::string te = std::string(VALVEDIAG_DATA_DIR) + "/tennessee-eastman/";
+  const std::string out = (kTmp / "te.json").string();
+  const test::CliResult r = run({"sweep", te + "m1d00.mat", te + "m1d14.mat", "--op", "51", "--pv",
+                                 "21", "--sample-period", "36", "--json", out},
+                                600.0);
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  const nlohmann::json j = read_json(out);
+  const nlohmann::json* faulty = loop_in(j, "m1d14");
+  const nlohmann::json* normal = loop_in(j, "m1d00");
+  REQUIRE(faulty != nullptr);
+  REQUIRE(normal != nullptr);
+  CHECK((*faulty)["verdict"] == "stiction");
+  CHECK((*faulty)["limit_cycle"]["stick_slip"] == true);
+  // The apparent band (% of travel): TE's valve jumps once OP is 2 % away from it.
+  CHECK((*faulty)["stiction_percent"].get<double>() > 1.5);
+  CHECK((*faulty)["stiction_percent"].get<double>() < 4.0);
+  CHECK((*faulty)["health"]["oscillating"] == true);
+  CHECK((*normal)["verdict"] == "no-valve-problem");
+  CHECK((*normal)["limit_cycle"]["stick_slip"] == false);
+}
+
 TEST_CASE("sweep: a loop over its time limit is stopped and reported; user errors exit 2") {
   const std::string longf = (kTmp / "long.csv").string();
   REQUIRE(
