@@ -3,8 +3,11 @@
 // stopped at its time limit, and user errors.
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include "../common/run_cli.hpp"
@@ -183,6 +186,69 @@ TEST_CASE("sweep over the Tennessee Eastman runs: the sticking fault is stiction
   CHECK((*faulty)["health"]["oscillating"] == true);
   CHECK((*normal)["verdict"] == "no-valve-problem");
   CHECK((*normal)["limit_cycle"]["stick_slip"] == false);
+}
+
+#ifdef VALVEDIAG_SANITIZED
+constexpr bool kSanitized = true;  // every 5th file: memory checks, not the accuracy figures
+#else
+constexpr bool kSanitized = false;
+#endif
+
+// Issue 5: the real plant loops labelled by their provider (shared/data/plant-loops), swept as
+// historian exports; the confusion table of verdict against label as the README shows it. The
+// file names' `Stick1=` figure is the provider's and is never read.
+TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
+  const fs::path root = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops";
+  std::vector<std::string> args{"sweep"};
+  std::size_t n = 0;
+  for (const char* label : {"stiction", "no-stiction"}) {
+    std::vector<std::string> files;
+    for (const auto& e : fs::directory_iterator(root / label)) files.push_back(e.path().string());
+    std::sort(files.begin(), files.end());
+    for (std::size_t i = 0; i < files.size(); i += kSanitized ? 5 : 1, ++n)
+      args.push_back(files[i]);
+  }
+  const std::string out = (kTmp / "plant.json").string();
+  for (const char* a : {"--delimiter", "tab", "--skip-lines", "2", "--skip-after-header", "2",
+                        "--time-format", "%Y-%m-%d %H:%M:%S", "--t", "1", "--op", "*.MV", "--pv",
+                        "*.PV", "--sp", "*.SV", "--jobs", "2", "--json"})
+    args.push_back(a);
+  args.push_back(out);
+  const test::CliResult r = run(args, 1200.0);
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  const nlohmann::json j = read_json(out);
+  REQUIRE(j["loops"].size() == n);
+  const char* verdicts[] = {"stiction",         "deadband",        "other-nonlinearity",
+                            "no-valve-problem", "not-enough-data", "error"};
+  std::map<std::string, std::map<std::string, int>> table;
+  for (const auto& l : j["loops"]) {
+    const std::string src = l["source"];
+    const std::string label =
+        src.find("/no-stiction/") != std::string::npos ? "no-stiction" : "stiction";
+    CHECK(!l["verdict"].get<std::string>().empty());
+    table[label][l["verdict"].get<std::string>()]++;
+  }
+  std::printf("\n| label \\ verdict |");
+  for (const char* v : verdicts) std::printf(" %s |", v);
+  std::printf("\n|---|---|---|---|---|---|---|\n");
+  for (const char* label : {"stiction", "no-stiction"}) {
+    int total = 0;
+    for (const char* v : verdicts) total += table[label][v];
+    std::printf("| %s (%d) |", label, total);
+    for (const char* v : verdicts) std::printf(" %d |", table[label][v]);
+    std::printf("\n");
+  }
+  if (kSanitized) return;
+  const double found = table["stiction"]["stiction"] / 18.0;
+  const double clean = 1.0 - table["no-stiction"]["stiction"] / 23.0;
+  std::printf("balanced accuracy %.1f %% (sticky found %.1f %%, clean kept %.1f %%)\n",
+              50 * (found + clean), 100 * found, 100 * clean);
+  // As measured (README); the issue aims at 85 % with at most 10 % false sticky.
+  CHECK(table["stiction"]["stiction"] >= 8);
+  CHECK(table["no-stiction"]["stiction"] == 0);
+  // The export with duplicate time stamps is refused, naming its line; the sweep goes on.
+  CHECK(table["stiction"]["error"] == 1);
 }
 
 TEST_CASE("sweep: a loop over its time limit is stopped and reported; user errors exit 2") {
