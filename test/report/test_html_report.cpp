@@ -212,6 +212,21 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
   CHECK(h.find("GNUPLOT") != std::string::npos);  // the footer names the plotting tool
 }
 
+TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
+  Fixture fx("paper-ex1", "preisach", 1500);
+  Diagnosis dg;
+  dg.steps.push_back({fx.fit, fx.where, {}});
+  dg.limit_cycle.oscillating = true;
+  dg.limit_cycle.summary = "PV oscillates <odd>";
+  ReportContent c = fx.content();
+  c.diagnosis = &dg;
+  const std::string h = html_report(c).html;
+  CHECK(h.find(">limit cycle<") != std::string::npos);
+  CHECK(h.find("PV oscillates &lt;odd&gt;") != std::string::npos);
+  dg.limit_cycle.oscillating = false;
+  CHECK(html_report(c).html.find(">limit cycle<") == std::string::npos);
+}
+
 TEST_CASE("a model without a Preisach valve: a note in place of the triangle") {
   Fixture fx("paper-ex1", "stiction", 1500);
   const HtmlReport r = html_report(fx.content());
