@@ -152,7 +152,8 @@ LimitCycle limit_cycle_test(const std::vector<double>& u, const std::vector<doub
     if (model_ok) See += std::norm(Y - cycle_amplitude(y_model, b, L, P));
   }
   if (segments == 0 || !(Suu > 0) || !(Syy > 0)) {
-    c.summary = "PV oscillates but the record holds less than two periods";
+    c.summary = segments == 0 ? "PV oscillates but the record holds less than two periods"
+                              : "PV oscillates but OP has no part at the cycle's frequency";
     return c;
   }
   const double ns = static_cast<double>(segments);
@@ -176,6 +177,10 @@ LimitCycle limit_cycle_test(const std::vector<double>& u, const std::vector<doub
     c.summary = head +
                 " (an even OP-PV cross-correlation): the controller's proportional action "
                 "shapes the cycle, as in a loop tuned too tightly, not a stick-slip cycle";
+  else if (std::isnan(c.model_share))
+    c.summary = head +
+                " (odd), but no model driven by OP was fitted (no stable linear part), so "
+                "it is not known whether OP drives the cycle";
   else if (!(c.model_share >= opt.min_model_share))
     c.summary = head + fmt(" (odd), but the model driven by OP carries only %.0f %% of PV's cycle: "
                            "an oscillation from outside the loop, not the valve",

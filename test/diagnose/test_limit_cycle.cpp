@@ -104,6 +104,7 @@ TEST_CASE("the test does not decide without a cycle, for an integrating process,
     const LimitCycle c = limit_cycle_test(s.u, s.y, {}, 1.0, false, kMemory);
     CHECK(std::isnan(c.model_share));
     CHECK_FALSE(c.stick_slip);
+    CHECK(c.summary.find("no model driven by OP") != std::string::npos);
   }
   SUBCASE("no valve model with memory gains: an outside cycle looks the same") {
     const Signals s = cycle(90.0);
