@@ -43,7 +43,6 @@ struct LimitCycle {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   bool oscillating = false;  // PV oscillates regularly
   double period_s = 0.0;
-  double regularity = 0.0;
   double op_amplitude = kNaN;  // OP's amplitude at the cycle's frequency, OP units
   double phase_deg = kNaN;     // phase of PV against OP at that frequency, (-180, 180]
   // Share of PV's cycle (complex amplitude at the cycle's frequency) that the model driven by OP

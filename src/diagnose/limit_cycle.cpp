@@ -113,7 +113,6 @@ LimitCycle limit_cycle_test(const std::vector<double>& u, const std::vector<doub
   if (trials.rival_gain - trials.memory_gain >= 0.2 * left) c.rival = trials.rival;
   const Oscillation osc = detect_oscillation(y);
   c.oscillating = osc.oscillating;
-  c.regularity = osc.regularity;
   if (!osc.oscillating || u.size() != y.size()) {
     c.summary = "PV does not oscillate regularly: the limit-cycle test does not apply";
     return c;

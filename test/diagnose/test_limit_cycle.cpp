@@ -72,7 +72,6 @@ TEST_CASE("the phase of PV against OP is measured at the cycle, odd near +-90 de
 
 TEST_CASE("the test does not decide without a cycle, for an integrating process, or without OP") {
   SUBCASE("white noise") {
-    const Signals s = cycle(90.0, 2000, 40.0, 0.0, 0.0);
     std::mt19937_64 rng(3);
     std::normal_distribution<double> w(0.0, 1.0);
     std::vector<double> u(2000), y(2000);
