@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "isolated_mat_reader.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/mat_reader.hpp"
@@ -41,7 +42,7 @@ std::string seconds(double v) {
 }
 
 void list(const ImportArgs& a) {
-  const MatFileInfo info = list_mat_loops(a.file);
+  const MatFileInfo info = list_mat_loops_isolated(a.file);
   std::size_t loops = 0, matrices = 0, with_pv = 0;
   std::map<std::string, std::size_t> groups;  // parent path -> loops
   std::vector<std::string> order;
@@ -248,11 +249,11 @@ void add_import(CLI::App& app, int& exit_code) {
       // are named and skipped.
       std::filesystem::create_directories(a->out_dir);
       std::size_t written = 0, skipped = 0;
-      for (const auto& l : list_mat_loops(a->file).loops) {
+      for (const auto& l : list_mat_loops_isolated(a->file).loops) {
         const std::string out =
             (std::filesystem::path(a->out_dir) / (plain_name(l.path, a->file) + ".csv")).string();
         try {
-          const LoopData d = read_mat_loop(a->file, l.path, mat_options(*a, false));
+          const LoopData d = read_mat_loop_isolated(a->file, l.path, mat_options(*a, false));
           write_csv(out, d);
           std::cout << wrote(out, d, l.path) << "\n";
           ++written;
@@ -269,7 +270,7 @@ void add_import(CLI::App& app, int& exit_code) {
     }
     // One loop: --loop, or the file's only loop.
     const bool to_db = !a->db.empty();
-    LoopData d = read_mat_loop(a->file, a->loop, mat_options(*a, to_db), &notes);
+    LoopData d = read_mat_loop_isolated(a->file, a->loop, mat_options(*a, to_db), &notes);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     const std::string path = d.source.substr(a->file.size() + 1);  // "FILE:PATH"
     if (!a->out.empty() || !a->out_dir.empty()) {

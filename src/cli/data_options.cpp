@@ -1,6 +1,7 @@
 #include "data_options.hpp"
 
 #include "commands.hpp"
+#include "isolated_mat_reader.hpp"
 #include "valvediag/mat_reader.hpp"
 
 namespace valvediag::cli {
@@ -96,7 +97,7 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
     m.mv = c.mv_column;
     m.t = c.t_column;
     m.sample_period = c.sample_period;
-    return read_mat_loop(d.data, d.loop, m, &notes);
+    return read_mat_loop_isolated(d.data, d.loop, m, &notes);
   }
   d.csv.decimal = d.decimal[0];
   return read_loop_csv(d.data, d.csv, &notes);

@@ -1,6 +1,7 @@
 #include "isolated_jobs.hpp"
 
 #include <poll.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -68,6 +69,7 @@ JobOutcome finish(Running& r, bool killed, const char* why) {
     o.message = why;
   } else if (WIFSIGNALED(status)) {
     o.status = JobOutcome::Status::Crashed;
+    o.signal = WTERMSIG(status);
     o.message = std::string("the analysis crashed (signal ") + std::to_string(WTERMSIG(status)) +
                 ", " + strsignal(WTERMSIG(status)) + ")";
   } else if (r.data.empty() || (r.data[0] != 'O' && r.data[0] != 'E')) {
@@ -103,6 +105,7 @@ void run_isolated(std::size_t count, int parallel, double timeout_s,
       std::cout.flush();
       std::cerr.flush();
       std::fflush(nullptr);  // or the child would repeat buffered output
+      const pid_t parent = ::getpid();
       const pid_t pid = ::fork();
       if (pid < 0) {
         ::close(fds[0]);
@@ -110,6 +113,10 @@ void run_isolated(std::size_t count, int parallel, double timeout_s,
         throw std::runtime_error(std::string("cannot start a process: ") + std::strerror(errno));
       }
       if (pid == 0) {
+        // The job dies with its parent: a sweep killed at its own time limit (or by kill -9)
+        // must not leave a job running, e.g. a .mat read stuck in libmatio.
+        ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+        if (::getppid() != parent) ::_exit(3);  // the parent died before prctl
         ::close(fds[0]);
         for (const auto& r : running) ::close(r.fd);
         child(fds[1], next, work);

@@ -16,6 +16,7 @@ struct JobOutcome {
   Status status = Status::Ok;
   std::string output;   // what the job returned (Ok)
   std::string message;  // why not Ok: the exception text, the signal, the time limit
+  int signal = 0;       // Crashed: the signal that ended the child (0: it exited without result)
   double elapsed_s = 0.0;
 };
 

@@ -29,4 +29,13 @@ DataError::DataError(std::string file_, std::size_t line_, std::string column_,
       line(line_),
       column(std::move(column_)) {}
 
+DataError::DataError(Composed, const std::string& what, std::string file_, std::size_t line_,
+                     std::string column_)
+    : std::runtime_error(what), file(std::move(file_)), line(line_), column(std::move(column_)) {}
+
+DataError DataError::rebuilt(std::string file, std::size_t line, std::string column,
+                             const std::string& what) {
+  return DataError(Composed{}, what, std::move(file), line, std::move(column));
+}
+
 }  // namespace valvediag

@@ -196,3 +196,23 @@ TEST_CASE("Tennessee Eastman m1d14: the cooling-water loop named by matrix colum
   CHECK(no_period.status == 2);
   CHECK(has(no_period.out, "--sample-period"));
 }
+
+TEST_CASE("a damaged .mat file is a clear error, never a crash of the command") {
+  // Files that crash libmatio (v5, v7.3) in test/io/damaged-mat/; the hanging ones are tested
+  // with a short time limit in test_io.
+  const std::string dir = std::string(VALVEDIAG_TEST_DIR) + "/io/damaged-mat/";
+  for (const char* name : {"v5-segfault.mat", "v73-segfault.mat"}) {
+    const std::string mat = dir + name;
+    INFO(name);
+    for (const auto& args : std::vector<std::vector<std::string>>{
+             {"import", mat},
+             {"import", mat, "--loop", "runs(1)", "--out", tmp("damaged.csv")},
+             {"diagnose", mat, "--loop", "runs(1)", "--no-history"}}) {
+      const CliResult r = run(args);
+      INFO(r.out);
+      CHECK(r.status == 2);
+      CHECK(has(r.out, mat + ": "));
+      CHECK(has(r.out, "the file is damaged"));
+    }
+  }
+}

@@ -8,7 +8,9 @@
 #include <csignal>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <stdexcept>
+#include <string>
 #include <thread>
 
 #include "../../src/cli/isolated_jobs.hpp"
@@ -187,6 +189,48 @@ TEST_CASE("isolated jobs: results, exceptions, crashes and time limits stay with
   CHECK(out[3].status == JobOutcome::Status::TimedOut);
   CHECK(out[3].elapsed_s >= 1.0);
   CHECK(wall < 20.0);  // the sleeping job was killed, not waited for
+
+  // A job killed at its time limit takes its own jobs with it: the sweep's loop job reads a
+  // .mat file in a job of its own, which may be stuck in libmatio.
+  const fs::path pid_file =
+      fs::temp_directory_path() / ("valvediag_test_nested_" + std::to_string(::getpid()) + ".pid");
+  fs::remove(pid_file);
+  JobOutcome outer;
+  run_isolated(
+      1, 1, 1.0,
+      [&](std::size_t) -> std::string {
+        run_isolated(
+            1, 1, 300.0,
+            [&](std::size_t) -> std::string {
+              std::ofstream(pid_file) << ::getpid() << "\n";
+              std::this_thread::sleep_for(std::chrono::seconds(300));
+              return "";
+            },
+            [](std::size_t, const JobOutcome&) {});
+        return "";
+      },
+      [&](std::size_t, const JobOutcome& o) { outer = o; });
+  CHECK(outer.status == JobOutcome::Status::TimedOut);
+  long inner = 0;
+  std::ifstream(pid_file) >> inner;
+  REQUIRE(inner > 0);
+  // Gone, or a zombie left for init to reap (a container's init may not reap it).
+  auto alive = [](long pid) {
+    if (::kill(static_cast<pid_t>(pid), 0) != 0) return false;
+    std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+    std::string line;
+    std::getline(stat, line);
+    const auto close = line.rfind(')');
+    return close != std::string::npos && close + 2 < line.size() && line[close + 2] != 'Z';
+  };
+  bool gone = false;
+  for (int i = 0; i < 100 && !gone; ++i) {
+    gone = !alive(inner);
+    if (!gone) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  CHECK(gone);
+  if (!gone) ::kill(static_cast<pid_t>(inner), SIGKILL);
+  fs::remove(pid_file);
 
   std::atomic<bool> stop{true};  // a stop before the start runs nothing
   int ran = 0;
