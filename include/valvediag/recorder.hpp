@@ -70,11 +70,17 @@ struct RecordedLoop {
 // (seconds since the run's start; nullopt: all). Throws RecordingGapError when OP or PV is not
 // good on some tick in the range, listing the gaps and the longest clean stretch to ask for
 // instead; std::runtime_error when the file, loop or run does not exist.
-// With `longest_clean`, a range with gaps gives its longest clean stretch instead (with a note).
+// With `bridge_ticks` > 0, a gap of at most that many ticks between good samples is first filled
+// by linear interpolation (with a note): one missed poll on a loaded machine must not cost the
+// analysis most of a window. With `longest_clean`, a range with gaps left gives its longest clean
+// stretch instead (with a note). The recording itself is never changed.
 RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
                                 std::optional<double> from_s = std::nullopt,
                                 std::optional<double> to_s = std::nullopt, std::int64_t run = 0,
-                                bool longest_clean = false);
+                                bool longest_clean = false, std::size_t bridge_ticks = 0);
+// The short gaps the analysis commands bridge (a loop's dynamics span many samples; two
+// interpolated samples are within the noise of identification).
+inline constexpr std::size_t kBridgedTicks = 2;
 
 struct RecorderOptions {
   std::string db_path;

@@ -81,8 +81,11 @@ void diagnose_and_report(const LoopData& d, const FitRun& run, const std::string
     std::printf(" done in %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     const auto& base = diag.last().fit;
-    std::printf("  linear: %.2f %% estimation, %.2f %% validation; the best trial fits:\n",
-                base.fitness_percent, base.validation_fitness_percent);
+    if (std::isfinite(base.fitness_percent))
+      std::printf("  linear: %.2f %% estimation, %.2f %% validation; the best trial fits:\n",
+                  base.fitness_percent, base.validation_fitness_percent);
+    else  // gains are then counted from a fitness of 0 (the mean)
+      std::printf("  linear: no stable model on this record; the best trial fits:\n");
     const auto& findings = diag.last().findings;
     for (std::size_t i = 0; i < findings.size() && i < 3; ++i)
       std::printf("  %zu. + %-15s score %.2f, %+.2f points on validation\n", i + 1,
@@ -197,8 +200,10 @@ void add_demo(CLI::App& app, int& exit_code) {
       std::cout << " done in " << st.elapsed_s << " s\n" << recorder_summary(st, db, rec.run_id());
       if (plc.write_requests() != 0)
         throw std::runtime_error("the demo sent a write request: this is a bug");
-      // Ticks the recorder missed (a loaded machine) are gaps: fit the longest clean stretch.
-      RecordedLoop r = read_recorded_loop(db, "FIC101", std::nullopt, std::nullopt, 0, true);
+      // Ticks the recorder missed (a loaded machine) are gaps: short ones are bridged, then the
+      // longest clean stretch is fitted.
+      RecordedLoop r =
+          read_recorded_loop(db, "FIC101", std::nullopt, std::nullopt, 0, true, kBridgedTicks);
       for (const auto& n : r.notes) std::cout << "note: " << n << "\n";
       if (r.data.size() < a->samples / 2)
         throw std::runtime_error("only " + std::to_string(r.data.size()) +

@@ -104,7 +104,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
         return assessment_json(x).dump();
       }
       RecordedLoop r = read_recorded_loop(a.db, job.name, std::max(0.0, *end - window_s), *end, 0,
-                                          /*longest_clean=*/true);
+                                          /*longest_clean=*/true, kBridgedTicks);
       d = std::move(r.data);
       d.source = a.db + " (run " + std::to_string(r.run) + ")";
     }

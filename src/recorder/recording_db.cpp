@@ -207,7 +207,7 @@ std::string fmt_time(double t) {
 
 RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
                                 std::optional<double> from_s, std::optional<double> to_s,
-                                std::int64_t run, bool longest_clean) {
+                                std::int64_t run, bool longest_clean, std::size_t bridge_ticks) {
   if (!std::filesystem::exists(db_path))
     throw std::runtime_error(
         db_path + ": no such database; record one with valvediag record --db " + db_path);
@@ -317,6 +317,63 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     }
   }
   sqlite3_finalize(s);
+  if (bridge_ticks > 0 && !gaps.empty()) {
+    // Short gaps between good samples: filled by linear interpolation, every signal alike.
+    std::vector<Gap> kept;
+    std::string bridged;
+    std::size_t n_bridged = 0, ticks_bridged = 0;
+    std::vector<std::int64_t> t2;
+    std::vector<double> op2, pv2, sp2, mv2;
+    std::size_t g = 0;
+    for (std::size_t i = 0; i < ticks.size(); ++i) {
+      if (i > 0) {
+        const std::int64_t a = ticks[i - 1], b = ticks[i];
+        const auto missing = static_cast<std::size_t>(b - a - 1);
+        if (missing > 0 && missing <= bridge_ticks) {
+          for (std::int64_t k = a + 1; k < b; ++k) {
+            const double w = static_cast<double>(k - a) / static_cast<double>(b - a);
+            auto lerp = [&](const std::vector<double>& v) {
+              return v[i - 1] + w * (v[i] - v[i - 1]);
+            };
+            t2.push_back(k);
+            op2.push_back(lerp(op));
+            pv2.push_back(lerp(pv));
+            if (!sp.empty()) sp2.push_back(lerp(sp));
+            if (!mv.empty()) mv2.push_back(lerp(mv));
+          }
+          if (n_bridged < 5)
+            bridged += (n_bridged ? ", " : "") + fmt_time(static_cast<double>(a + 1) * P);
+          ++n_bridged;
+          ticks_bridged += missing;
+          // The gaps inside (a, b) are bridged; the rest stay.
+          while (g < gaps.size() && gaps[g].b < b) {
+            if (gaps[g].a <= a) kept.push_back(gaps[g]);
+            ++g;
+          }
+        }
+      }
+      t2.push_back(ticks[i]);
+      op2.push_back(op[i]);
+      pv2.push_back(pv[i]);
+      if (!sp.empty()) sp2.push_back(sp[i]);
+      if (!mv.empty()) mv2.push_back(mv[i]);
+    }
+    if (n_bridged > 0) {
+      while (g < gaps.size()) kept.push_back(gaps[g++]);
+      // Gaps before the first or after the last good sample (or longer ones) are not bridged.
+      gaps.swap(kept);
+      ticks.swap(t2);
+      op.swap(op2);
+      pv.swap(pv2);
+      sp.swap(sp2);
+      mv.swap(mv2);
+      out.notes.push_back(std::to_string(n_bridged) + " short gap(s) of at most " +
+                          std::to_string(bridge_ticks) + " tick(s) (" +
+                          std::to_string(ticks_bridged) + " in all, at " + bridged +
+                          (n_bridged > 5 ? ", ..." : "") +
+                          " s) filled by linear interpolation between the good samples");
+    }
+  }
   if (!gaps.empty()) {
     // Longest clean stretch: suggested, or used with `longest_clean`.
     std::int64_t best_a = 0, best_len = 0, run_a = 0, run_len = 0;

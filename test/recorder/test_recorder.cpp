@@ -336,3 +336,71 @@ TEST_CASE("frozen registers: rows marked stale and counted with stale_after, goo
   CHECK(scalar(db, "SELECT max(tick) FROM samples WHERE q_pv = 1") <= 42);
   CHECK(no_writes(plc));
 }
+
+TEST_CASE("short gaps are bridged by interpolation when asked; long ones still split the range") {
+  // One loop at 1 s, op = k, pv = 2k, sp = 3k on tick k: interpolation across a gap is exact.
+  const std::string db = fresh_db("bridge");
+  {
+    RecordingDb rec(db);
+    const std::int64_t run = rec.begin_run("test");
+    LoopConfigEntry loop{};
+    loop.name = "loop-with-short-gaps";  // (a short name trips g++ 12's -Wmaybe-uninitialized)
+    loop.sample_period_s = 1.0;
+    loop.points[static_cast<std::size_t>(PointName::sp)].present = true;
+    const std::int64_t id = rec.add_loop(run, loop);
+    std::vector<SampleRow> rows;
+    for (std::int64_t k = 0; k < 100; ++k) {
+      if (k == 60) continue;  // a row lost (kill -9 before a commit)
+      SampleRow r;
+      r.loop_id = id;
+      r.tick = k;
+      const double x = static_cast<double>(k);
+      Quality q = Quality::good;
+      if (k == 10 || (k >= 40 && k <= 44)) q = Quality::missed;
+      if (k == 20 || k == 21) q = Quality::comm_error;
+      r.values[0] = {q == Quality::good ? x : std::nan(""), q};
+      r.values[1] = {q == Quality::good ? 2 * x : std::nan(""), q};
+      r.values[2] = {3 * x, Quality::good};
+      rows.push_back(r);
+    }
+    rec.insert(rows);
+    rec.end_run(run, "done");
+  }
+  auto exact = [](const RecordedLoop& r, std::int64_t first) {
+    for (std::size_t i = 0; i < r.data.size(); ++i) {
+      const double k = static_cast<double>(first) + static_cast<double>(i);
+      if (std::abs(r.data.t[i] - k) > 1e-9 || std::abs(r.data.op[i] - k) > 1e-9 ||
+          std::abs(r.data.pv[i] - 2 * k) > 1e-9 || std::abs(r.data.sp[i] - 3 * k) > 1e-9)
+        return false;
+    }
+    return true;
+  };
+  auto note_with = [](const RecordedLoop& r, const std::string& part) {
+    for (const auto& n : r.notes)
+      if (n.find(part) != std::string::npos) return true;
+    return false;
+  };
+  // Without bridging: the longest clean stretch is after the lost row.
+  const RecordedLoop plain =
+      read_recorded_loop(db, "loop-with-short-gaps", std::nullopt, std::nullopt, 0, true);
+  CHECK(plain.data.size() == 39);
+  CHECK(exact(plain, 61));
+  // Bridged: the gaps of 1 and 2 ticks and the lost row are filled; the 5-tick gap is not, so
+  // the longest stretch is now 45 .. 99 (with tick 60 interpolated).
+  const RecordedLoop b = read_recorded_loop(db, "loop-with-short-gaps", std::nullopt, std::nullopt,
+                                            0, true, kBridgedTicks);
+  CHECK(b.data.size() == 55);
+  CHECK(exact(b, 45));
+  CHECK(note_with(b, "3 short gap(s) of at most 2 tick(s) (4 in all, at 10, 20, 60 s)"));
+  CHECK(note_with(b, "using the longest clean stretch, 45 .. 99 s"));
+  // A range whose only gaps are short reads whole without asking for the longest stretch.
+  const RecordedLoop head =
+      read_recorded_loop(db, "loop-with-short-gaps", 0.0, 39.0, 0, false, kBridgedTicks);
+  CHECK(head.data.size() == 40);
+  CHECK(exact(head, 0));
+  // Bridging never hides a long gap: without longest_clean it is still an error.
+  CHECK_THROWS_AS(
+      read_recorded_loop(db, "loop-with-short-gaps", std::nullopt, std::nullopt, 0, false, 2),
+      RecordingGapError);
+  CHECK_THROWS_AS(read_recorded_loop(db, "loop-with-short-gaps", 0.0, 39.0), RecordingGapError);
+}
