@@ -74,9 +74,10 @@ struct ModelFit {
   bool integrating = false;  // A = (1 - q^-1) A'(q^-1): a, b, c belong to the differenced form
   std::vector<double> a, b;
   double c = 0.0;
-  // Estimated slow load d(t) (empty without `disturbance`). On the held-out part it is estimated
-  // again with the dynamics fixed (a load cannot be predicted: the held-out check is of the
-  // dynamics); simulate_model() holds the last estimated value instead.
+  // Estimated slow load d(t) (empty without `disturbance`). On the held-out part it is predicted
+  // one knot interval ahead from the measured past (the mean equation error of the interval
+  // before), never fitted to the held-out samples; simulate_model() holds the last estimated
+  // value instead.
   std::vector<double> disturbance;
   double fitness_percent = std::numeric_limits<double>::quiet_NaN();  // estimation (eq 20)
   double validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();  // NaN: no split

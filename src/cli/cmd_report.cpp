@@ -1,6 +1,7 @@
 // valvediag report: one self-contained HTML page about a loop and its model (html_report.hpp).
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -199,8 +200,11 @@ void add_report(CLI::App& app, int& exit_code) {
     c.notes = notes;
     c.generator = "valvediag report";
     const ReportFile r = write_report_file(out, c, ro);
-    std::printf("model:     %s: %.2f %% estimation, %.2f %% validation\n",
-                to_string(fit.spec).c_str(), fit.fitness_percent, fit.validation_fitness_percent);
+    if (std::isfinite(fit.fitness_percent))
+      std::printf("model:     %s: %.2f %% estimation, %.2f %% validation\n",
+                  to_string(fit.spec).c_str(), fit.fitness_percent, fit.validation_fitness_percent);
+    else
+      std::printf("model:     %s: no stable model on this record\n", to_string(fit.spec).c_str());
     if (diagnosed) std::printf("verdict:   %s\n", verdict(diag).c_str());
     std::fflush(stdout);
     std::cout << report_file_summary(out, r);

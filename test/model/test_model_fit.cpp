@@ -284,6 +284,42 @@ TEST_CASE("integrator and disturbance forms") {
   CHECK(both.disturbance.size() == d.size());
 }
 
+TEST_CASE("a disturbance model's held-out load is predicted from the past, not fitted there") {
+  // load-changes: real slow loads; the held-out part is scored with the load predicted one knot
+  // interval ahead (the mean equation error of the interval before).
+  LoopData d = scenario_data("load-changes", 1);
+  const ModelFit lin = fit(d, "linear", split());
+  const ModelFit dist = fit(d, "disturbance", split());
+  show(lin);
+  show(dist);
+  const std::size_t N = d.size(), e0 = dist.estimation_end;
+  const double h_s = param(dist, "disturbance", "knot_spacing");
+  REQUIRE(h_s > 0);
+  const auto h = static_cast<std::size_t>(std::llround(h_s / d.sample_period()));
+  REQUIRE(dist.disturbance.size() == N);
+  // Constant over each knot interval of the held-out part.
+  for (std::size_t t = e0; t < N; ++t)
+    if ((t - e0) % h != 0) REQUIRE(dist.disturbance[t] == dist.disturbance[t - 1]);
+  // A real slow load is predictable: the model with it is better on the held-out part.
+  CHECK(dist.validation_fitness_percent > lin.validation_fitness_percent + 20.0);
+  // Causal: a jump of PV late in the held-out part changes nothing before it (a load fitted to
+  // the held-out samples would bend towards it), and earns the model nothing there.
+  const std::size_t m = N - h - h / 2;
+  for (std::size_t t = m; t < N; ++t) d.pv[t] += 50.0;
+  const ModelFit moved = fit(d, "disturbance", split());
+  REQUIRE(moved.disturbance.size() == N);
+  REQUIRE(moved.estimation_end == e0);
+  for (std::size_t t = 0; t < m; ++t) {
+    INFO(t);
+    REQUIRE(moved.disturbance[t] == doctest::Approx(dist.disturbance[t]).epsilon(1e-9));
+    REQUIRE(moved.y_sim[t] == doctest::Approx(dist.y_sim[t]).epsilon(1e-9));
+  }
+  // The interval holding the jump still predicts the load from before it.
+  const std::size_t interval_end = std::min(N, e0 + ((m - e0) / h + 1) * h);
+  for (std::size_t t = m; t < interval_end; ++t)
+    CHECK(moved.disturbance[t] == doctest::Approx(dist.disturbance[t]).epsilon(1e-9));
+}
+
 TEST_CASE("paper comparison: Preisach vs He vs Kano on simulated loops") {
   // Asymmetric (position-dependent) stiction, as the paper's Examples 2 and 4: validation on a
   // separate record of the same loop (another noise seed), as in Example 4.

@@ -43,6 +43,16 @@ const nlohmann::json* loop_in(const nlohmann::json& j, const std::string& name) 
 }
 }  // namespace
 
+#ifdef VALVEDIAG_SANITIZED
+// A diagnosis runs about ten times slower under the sanitizers, and once FIC101 is found sticky
+// the climb tries every effect on top of stiction (30 s on 3600 samples in Release): half the
+// recording keeps both sweeps of the case below within their time limits. The verdict is only
+// warned about there.
+const char* const kRecordFor = "18s";
+#else
+const char* const kRecordFor = "36s";
+#endif
+
 TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend; nothing written") {
   SimPlc plc(load_site_config(kSimSite), SimPlcOptions{50.0, 0});
   plc.start();
@@ -66,7 +76,7 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
   const std::string db = fresh("sweep.sqlite");
   const std::string json = (kTmp / "sweep.json").string(), csv = (kTmp / "sweep.csv").string(),
                     html = (kTmp / "sweep.html").string();
-  auto r = run({"sweep", "--config", site, "--db", db, "--record", "36s", "--window", "1h",
+  auto r = run({"sweep", "--config", site, "--db", db, "--record", kRecordFor, "--window", "1h",
                 "--json", json, "--csv", csv, "--html", html});
   INFO(r.out);
   CHECK(r.status == 0);  // findings and a dead loop are results
@@ -79,10 +89,10 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
   CHECK(j["loops"][1]["loop"] == "DEAD201");
   CHECK(j["loops"][1]["verdict"] == "not-enough-data");
   // The recorded samples depend on when each poll meets the simulated PLC's step (machine
-  // timing), and on some recordings a re-estimated slow load rivals stiction (seen under the
-  // sanitizers with a full 3600-sample window; see the issue note). So the verdict on recorded
-  // data is a warning; test_sweep.cpp and the file sweep below assert it on fixed data. Here the
-  // loop must be analysed (a verdict from the model, not an error or unusable data).
+  // timing), and on one recording a slow load rivalled stiction (under the sanitizers with a full
+  // 3600-sample window, when the load was still fitted to the held-out part). So the verdict on
+  // recorded data is a warning; test_sweep.cpp and the file sweep below assert it on fixed data.
+  // Here the loop must be analysed (a verdict from the model, not an error or unusable data).
   const std::string v = fic["verdict"];
   CHECK(
       (v == "stiction" || v == "deadband" || v == "other-nonlinearity" || v == "no-valve-problem"));
