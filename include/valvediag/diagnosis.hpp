@@ -15,6 +15,7 @@
 #include "valvediag/model_fit.hpp"
 #include "valvediag/model_spec.hpp"
 #include "valvediag/residual_analysis.hpp"
+#include "valvediag/whole_record_test.hpp"
 
 namespace valvediag {
 
@@ -43,6 +44,10 @@ struct DiagnoseOptions {
   double min_gain_percent = 2.0;        // --auto: a step must gain this much (validation)
   double min_score = 0.35;              // --auto: and score at least this
   int max_steps = 4;                    // --auto: at most this many effects added
+  // The whole-record test (whole_record_test.hpp) when the climb ends without memory: off, the
+  // verdict rests on the held-out trial fits and the limit cycle alone.
+  bool whole_record = true;
+  WholeRecordOptions whole_record_options;
 };
 
 struct DiagnosisStep {
@@ -58,6 +63,10 @@ struct Diagnosis {
   // the evidence of a stick-slip cycle that trial fits can miss (a slip exactly at each OP
   // reversal leaves a fitted friction threshold no margin).
   LimitCycle limit_cycle;
+  // The whole-record test (whole_record_test.hpp), run when neither the climb nor the limit
+  // cycle found a valve with memory: a valve that slips once or twice in the record leaves the
+  // held-out part too few slips to confirm its band.
+  WholeRecordTest whole_record;
   const DiagnosisStep& last() const { return steps.back(); }
 };
 

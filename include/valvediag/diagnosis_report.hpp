@@ -16,6 +16,9 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t);
 // and back (missing keys keep their defaults).
 nlohmann::json limit_cycle_json(const LimitCycle& c);
 LimitCycle limit_cycle_from_json(const nlohmann::json& j);
+// The whole-record test's figures (whole_record_test.hpp), likewise.
+nlohmann::json whole_record_json(const WholeRecordTest& w);
+WholeRecordTest whole_record_from_json(const nlohmann::json& j);
 std::string format_ladder(const std::vector<HistoryEntry>& entries);
 
 // A fit of a composable model (fit --model/--add/--remove): summary and JSON.

@@ -40,8 +40,9 @@ struct LoopAssessment {
   std::string first_missing;  // the effect the linear model misses first ("" when none)
   std::vector<LadderStep> ladder;
   LoopHealth health;
-  LimitCycle limit_cycle;  // the diagnosis's limit-cycle test (not run: not oscillating)
-  double severity = 0.0;   // ranking key, higher first (see assess_loop)
+  LimitCycle limit_cycle;        // the diagnosis's limit-cycle test (not run: not oscillating)
+  WholeRecordTest whole_record;  // the diagnosis's whole-record test (not run: not needed)
+  double severity = 0.0;         // ranking key, higher first (see assess_loop)
   double elapsed_s = 0.0;
   std::string error;   // the analysis failed: exception text, timeout, crash
   std::string report;  // the loop's HTML report, when one was written

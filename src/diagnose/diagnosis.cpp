@@ -395,8 +395,32 @@ LimitCycle limit_cycle_of(const std::vector<double>& u, const std::vector<double
                           trials);
 }
 
+// The whole-record test, when the valve part of the final model (or the single step's supported
+// finding) has no memory and the limit cycle did not decide.
+WholeRecordTest whole_record_of(const std::vector<double>& u, const std::vector<double>& y,
+                                double Ts, const Diagnosis& d, const DiagnoseOptions& opt) {
+  if (!opt.whole_record || d.limit_cycle.stick_slip) return {};
+  ModelSpec m = d.last().fit.spec;
+  if (d.steps.size() == 1 && !d.last().findings.empty() && d.last().findings.front().supported)
+    m = d.last().findings.front().trial_spec;
+  if (m.has("stiction") || m.has("preisach") || m.has("deadband")) return {};
+  try {
+    return whole_record_test(u, y, Ts, d.steps.front().fit.spec, fit_options(opt),
+                             opt.whole_record_options);
+  } catch (const std::invalid_argument&) {
+    return {};  // e.g. too few samples for a variant's estimator: the test does not decide
+  }
+}
+
 std::string with_limit_cycle(std::string conclusion, const LimitCycle& c) {
   if (c.stick_slip) conclusion += " Limit cycle: " + c.summary + ".";
+  return conclusion;
+}
+
+std::string with_whole_record(std::string conclusion, const WholeRecordTest& w) {
+  if (w.confirmed)
+    conclusion += " O" + w.summary.substr(1) +  // "on the whole record ..."
+                  "; the held-out part holds too few slips to confirm the band.";
   return conclusion;
 }
 
@@ -409,11 +433,15 @@ Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, d
   const auto& f = d.last().findings;
   const bool supported = !f.empty() && f.front().supported;
   d.limit_cycle = limit_cycle_of(u, y, Ts, d);
-  d.conclusion = with_limit_cycle(
-      conclusion_of(d.last(), {}, Ts,
-                    supported ? "The most likely missing effect is `" + f.front().effect + "`."
-                              : "No candidate effect improves the model by a meaningful margin."),
-      d.limit_cycle);
+  d.whole_record = whole_record_of(u, y, Ts, d, opt);
+  d.conclusion = with_whole_record(
+      with_limit_cycle(
+          conclusion_of(d.last(), {}, Ts,
+                        supported
+                            ? "The most likely missing effect is `" + f.front().effect + "`."
+                            : "No candidate effect improves the model by a meaningful margin."),
+          d.limit_cycle),
+      d.whole_record);
   return d;
 }
 
@@ -444,7 +472,9 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
     model = best.trial_spec;
   }
   d.limit_cycle = limit_cycle_of(u, y, Ts, d);
-  d.conclusion = with_limit_cycle(conclusion_of(d.last(), {}, Ts, why), d.limit_cycle);
+  d.whole_record = whole_record_of(u, y, Ts, d, opt);
+  d.conclusion = with_whole_record(
+      with_limit_cycle(conclusion_of(d.last(), {}, Ts, why), d.limit_cycle), d.whole_record);
   return d;
 }
 

@@ -25,6 +25,13 @@ std::string verdict(const Diagnosis& d) {
   // valve slips at each OP reversal, which leaves a fitted friction threshold no margin, while
   // a static curve cannot make the loop cycle by itself.
   if (d.limit_cycle.stick_slip) return "stiction";
+  // A valve with memory that explains the whole record better than any memoryless model and a
+  // load (whole_record_test.hpp) outweighs a static nonlinearity the held-out fits preferred.
+  if (d.whole_record.confirmed) {
+    const auto& e = d.whole_record.memory_effects;
+    const bool backlash = !e.empty() && e.front().name == "deadband";
+    return backlash ? "deadband" : "stiction";
+  }
   if (m.has("saturation") || m.has("characteristic") || m.has("actuator-lag"))
     return "other-nonlinearity";
   return "no-valve-problem";
@@ -223,7 +230,10 @@ LoopVerdict loop_verdict(const std::vector<double>& u, const std::vector<double>
 
   if (opt.run_diagnosis) {
     try {
-      v.diagnosis = diagnose(u, y, Ts, parse_model_spec("linear"), opt.diagnose);
+      // Its own whole-record fits decide here: the diagnosis's whole-record test is not needed.
+      DiagnoseOptions dopt = opt.diagnose;
+      dopt.whole_record = false;
+      v.diagnosis = diagnose(u, y, Ts, parse_model_spec("linear"), dopt);
       const auto& fl = v.diagnosis.last().findings;
       if (!fl.empty()) {
         f.finding = fl.front().effect;

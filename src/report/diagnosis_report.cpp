@@ -88,6 +88,7 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
       o << "           " << g.label << " carries " << num(100 * g.share, 0) << " % of the error\n";
   }
   if (d.limit_cycle.oscillating) o << "limit cycle: " << d.limit_cycle.summary << "\n";
+  if (d.whole_record.tested) o << "whole record: " << d.whole_record.summary << "\n";
   o << "verdict:   " << verdict(d) << "\n";
   o << d.conclusion << "\n";
   return o.str();
@@ -121,6 +122,40 @@ LimitCycle limit_cycle_from_json(const nlohmann::json& j) {
   return c;
 }
 
+nlohmann::json whole_record_json(const WholeRecordTest& w) {
+  return {{"tested", w.tested},
+          {"confirmed", w.confirmed},
+          {"memory_model", w.memory_model},
+          {"start_fitness_percent", num_json(w.start_fitness)},
+          {"memory_fitness_percent", num_json(w.memory_fitness)},
+          {"relative_gain", num_json(w.relative_gain)},
+          {"load_fitness_percent", num_json(w.load_fitness)},
+          {"load_bic_margin", num_json(w.load_bic_margin)},
+          {"rival", w.rival},
+          {"rival_fitness_percent", num_json(w.rival_fitness)},
+          {"summary", w.summary}};
+}
+
+WholeRecordTest whole_record_from_json(const nlohmann::json& j) {
+  WholeRecordTest w;
+  if (!j.is_object()) return w;
+  auto num = [&j](const char* k) {
+    return j.contains(k) && j[k].is_number() ? j[k].get<double>() : WholeRecordTest::kNaN;
+  };
+  w.tested = j.value("tested", false);
+  w.confirmed = j.value("confirmed", false);
+  w.memory_model = j.value("memory_model", std::string());
+  w.start_fitness = num("start_fitness_percent");
+  w.memory_fitness = num("memory_fitness_percent");
+  w.relative_gain = num("relative_gain");
+  w.load_fitness = num("load_fitness_percent");
+  w.load_bic_margin = num("load_bic_margin");
+  w.rival = j.value("rival", std::string());
+  w.rival_fitness = num("rival_fitness_percent");
+  w.summary = j.value("summary", std::string());
+  return w;
+}
+
 nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) {
   using nlohmann::json;
   const auto& s = d.last();
@@ -139,6 +174,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) 
   j["effects"] = eff;
   j["verdict"] = verdict(d);
   j["limit_cycle"] = limit_cycle_json(d.limit_cycle);
+  j["whole_record"] = whole_record_json(d.whole_record);
   for (const auto& e : s.fit.effects)
     if (e.name == "stiction") {
       json st = json::object();

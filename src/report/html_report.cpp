@@ -725,6 +725,8 @@ void header_section(std::ostringstream& o, const ReportContent& c) {
       v.empty() ? std::string("not diagnosed") : "<span class=\"verdict\">" + e(v) + "</span>");
   if (c.diagnosis != nullptr && c.diagnosis->limit_cycle.oscillating)
     row(o, "limit cycle", e(c.diagnosis->limit_cycle.summary));
+  if (c.diagnosis != nullptr && c.diagnosis->whole_record.tested)
+    row(o, "whole record", e(c.diagnosis->whole_record.summary));
   if (c.where != nullptr)
     row(o, "residual",
         "RMS " + e(num(c.where->rms, 3)) + ", white-noise level " +

@@ -76,6 +76,7 @@ json assessment_json(const LoopAssessment& a) {
                  {"op_noise", number(h.op_noise)},
                  {"op_span_percent", number(h.op_span_percent)}};
   j["limit_cycle"] = limit_cycle_json(a.limit_cycle);
+  j["whole_record"] = whole_record_json(a.whole_record);
   j["elapsed_s"] = a.elapsed_s;
   j["error"] = a.error;
   j["report"] = a.report;
@@ -118,6 +119,7 @@ LoopAssessment assessment_from_json(const json& j) {
     o.op_span_percent = number_of(h, "op_span_percent");
   }
   if (j.contains("limit_cycle")) a.limit_cycle = limit_cycle_from_json(j["limit_cycle"]);
+  if (j.contains("whole_record")) a.whole_record = whole_record_from_json(j["whole_record"]);
   a.elapsed_s = number_of(j, "elapsed_s");
   a.error = text_of(j, "error");
   a.report = text_of(j, "report");

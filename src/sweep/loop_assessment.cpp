@@ -66,6 +66,11 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
 FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
                            const std::vector<double>& pv, const OpRange& range) {
   FrictionSize a = friction_size(d.last().fit, op, pv, range);
+  if (std::isnan(a.band_percent) && d.whole_record.confirmed) {
+    ModelFit whole;  // the friction figures of the whole-record memory fit
+    whole.effects = d.whole_record.memory_effects;
+    a = friction_size(whole, op, pv, range);
+  }
   if (std::isnan(a.band_percent) && verdict(d) == "stiction" && d.limit_cycle.stick_slip)
     a.band_percent = 100.0 * d.limit_cycle.apparent_band / std::max(range.hi - range.lo, 1e-12);
   return a;
@@ -130,6 +135,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   const ModelFit& best = dg.last().fit;
   a.verdict = verdict(dg);
   a.limit_cycle = dg.limit_cycle;
+  a.whole_record = dg.whole_record;
   a.model = to_string(best.spec);
   a.fitness_percent = best.fitness_percent;
   a.validation_fitness_percent = best.validation_fitness_percent;

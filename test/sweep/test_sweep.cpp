@@ -72,6 +72,17 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   a.limit_cycle.stick_slip = true;
   a.limit_cycle.apparent_band = 2.4;
   a.limit_cycle.summary = "PV oscillates";
+  a.whole_record.tested = true;
+  a.whole_record.confirmed = true;
+  a.whole_record.memory_model = "stiction:kano";
+  a.whole_record.start_fitness = 32.5;
+  a.whole_record.memory_fitness = 56.5;
+  a.whole_record.relative_gain = 0.355;
+  a.whole_record.load_fitness = 57.5;
+  a.whole_record.load_bic_margin = 57.0;
+  a.whole_record.rival = "characteristic";
+  a.whole_record.rival_fitness = 36.0;
+  a.whole_record.summary = "on the whole record";
   a.severity = severity(a);
   const LoopAssessment b = assessment_from_json(nlohmann::json::parse(assessment_json(a).dump()));
   CHECK(b.loop == a.loop);
@@ -89,6 +100,17 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK_FALSE(b.limit_cycle.integrating);
   CHECK(b.limit_cycle.apparent_band == 2.4);
   CHECK(b.limit_cycle.summary == "PV oscillates");
+  CHECK(b.whole_record.tested);
+  CHECK(b.whole_record.confirmed);
+  CHECK(b.whole_record.memory_model == "stiction:kano");
+  CHECK(b.whole_record.start_fitness == 32.5);
+  CHECK(b.whole_record.memory_fitness == 56.5);
+  CHECK(b.whole_record.relative_gain == 0.355);
+  CHECK(b.whole_record.load_fitness == 57.5);
+  CHECK(b.whole_record.load_bic_margin == 57.0);
+  CHECK(b.whole_record.rival == "characteristic");
+  CHECK(b.whole_record.rival_fitness == 36.0);
+  CHECK(b.whole_record.summary == "on the whole record");
   CHECK(b.severity == doctest::Approx(6 + 1 + 1.25));
 
   LoopAssessment n;  // NaN figures travel as null and come back NaN
@@ -97,6 +119,8 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   n.severity = severity(n);
   const LoopAssessment m = assessment_from_json(assessment_json(n));
   CHECK(std::isnan(m.stiction_percent));
+  CHECK_FALSE(m.whole_record.tested);
+  CHECK(std::isnan(m.whole_record.relative_gain));
   CHECK(std::isnan(m.fitness_percent));
   CHECK_THROWS_WITH_AS(assessment_from_json(nlohmann::json{{"verdict", "x"}}),
                        "a loop's result has no 'loop' name", std::runtime_error);

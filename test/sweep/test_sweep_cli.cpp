@@ -255,7 +255,7 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
   std::printf("balanced accuracy %.1f %% (sticky found %.1f %%, clean kept %.1f %%)\n",
               50 * (found + clean), 100 * found, 100 * clean);
   // As measured (README); the issue aims at 85 % with at most 10 % false sticky.
-  CHECK(table["stiction"]["stiction"] >= 8);
+  CHECK(table["stiction"]["stiction"] >= 12);
   CHECK(table["no-stiction"]["stiction"] == 0);
   // The export with duplicate time stamps is refused, naming its line; the sweep goes on.
   CHECK(table["stiction"]["error"] == 1);
