@@ -140,7 +140,10 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
     f << "t,op,pv\n0,1,2\n1,x,3\n";
   }
   const std::string all = (kTmp / "files.json").string();
-  auto r = run({"sweep", sticky, clean, bad, tiny, "--jobs", "2", "--json", all});
+  // Each sweep runs two 3000-sample diagnoses side by side: minutes under the sanitizers on a
+  // loaded machine, so each run gets the time of the test's own limit.
+  constexpr double kLimit = 600.0;
+  auto r = run({"sweep", sticky, clean, bad, tiny, "--jobs", "2", "--json", all}, kLimit);
   INFO(r.out);
   CHECK(r.status == 0);
   const auto j = read_json(all);
@@ -153,12 +156,10 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
 
   // Two shards cover the list once; sweep-merge gives the same verdicts.
   const std::string p0 = (kTmp / "part-0.json").string(), p1 = (kTmp / "part-1.json").string();
-  CHECK(
-      run({"sweep", sticky, clean, bad, tiny, "--shard", "0/2", "--json", p0, "--quiet"}).status ==
-      0);
-  CHECK(
-      run({"sweep", sticky, clean, bad, tiny, "--shard", "1/2", "--json", p1, "--quiet"}).status ==
-      0);
+  CHECK(run({"sweep", sticky, clean, bad, tiny, "--shard", "0/2", "--json", p0, "--quiet"}, kLimit)
+            .status == 0);
+  CHECK(run({"sweep", sticky, clean, bad, tiny, "--shard", "1/2", "--json", p1, "--quiet"}, kLimit)
+            .status == 0);
   CHECK(read_json(p0)["loops"].size() + read_json(p1)["loops"].size() == 4);
   const std::string merged = (kTmp / "merged.json").string();
   r = run({"sweep-merge", p0, p1, "--json", merged});
