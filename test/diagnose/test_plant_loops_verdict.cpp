@@ -334,7 +334,7 @@ TEST_CASE("a valve that slips once in the held-out tail is confirmed on the whol
   CHECK(d.whole_record.confirmed);
   CHECK(d.whole_record.relative_gain >= 0.3);
   CHECK(verdict(d) == "stiction");
-  CHECK(d.conclusion.find("Whole record:") != std::string::npos);
+  CHECK(d.conclusion.find("On the whole record `stiction") != std::string::npos);
   // Without the test the verdict rests on the held-out fits alone.
   DiagnoseOptions off;
   off.whole_record = false;
