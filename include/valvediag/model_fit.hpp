@@ -107,6 +107,11 @@ std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector
 std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double>& u,
                                    const std::vector<double>& y);
 
+// Free parameters `effect` adds to a fitted model: a Preisach valve its nonzero weights, a load
+// one level per knot over the estimation samples, an integrator none (it fixes a pole). Used to
+// charge flexible effects (Occam's tie-breaks, BIC).
+double effect_parameter_count(const std::string& effect, const ModelFit& fit, double Ts);
+
 // The linear options fit_model uses for a spec (structure range widened by delay/order,
 // integrator, disturbance, estimation window), for callers that reuse ArxEstimator.
 LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, std::size_t N);

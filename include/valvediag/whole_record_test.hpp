@@ -20,6 +20,9 @@
 //     imitates; but a load curve with one knot every few minutes explains such a record far
 //     better than two friction parameters can, while a slip-stick record is explained by the
 //     friction parameters as well as by the whole load curve.
+// Both comparisons count parameters by the Bayesian information criterion (a load one level per
+// knot, He's stiction its fs, fd and starting motion): a more flexible model must fit better by
+// more than its extra parameters would anyway.
 // Standard library, Eigen and NLopt only (through model_fit).
 #pragma once
 
@@ -45,13 +48,16 @@ struct WholeRecordTest {
   bool tested = false;       // false: not needed, or the start model has no stable fit
   bool confirmed = false;    // a valve with memory explains the record (the verdict may rest on it)
   std::string memory_model;  // the best stiction variant's spec, e.g. "stiction:kano"
-  double start_fitness = kNaN;    // whole-record fitness of the start model, %
-  double memory_fitness = kNaN;   // ... of the start model with the memory
-  double relative_gain = kNaN;    // share of the start model's error the memory removes
-  double load_fitness = kNaN;     // ... with `disturbance`
-  double load_bic_margin = kNaN;  // BIC(load) - BIC(memory); > 0: the memory is preferred
-  std::string rival;              // the best memoryless effect
-  double rival_fitness = kNaN;    // its whole-record fitness
+  double start_fitness = kNaN;     // whole-record fitness of the start model, %
+  double memory_fitness = kNaN;    // ... of the start model with the memory
+  double relative_gain = kNaN;     // share of the start model's error the memory removes
+  double load_fitness = kNaN;      // ... with `disturbance`
+  double load_bic_margin = kNaN;   // BIC(load) - BIC(memory); > 0: the memory is preferred
+  std::string rival;               // the best memoryless effect
+  double rival_fitness = kNaN;     // its whole-record fitness
+  double rival_bic_margin = kNaN;  // BIC(rival) - BIC(memory); > 0: the memory is preferred
+  // The memoryless effect (or `disturbance`) the record prefers to the memory, "" when none.
+  std::string preferred;
   std::vector<FittedEffect> memory_effects;  // the memory model's fitted effects (friction size)
   std::string summary;  // one sentence: what was found and why it counts or not
 };

@@ -503,6 +503,27 @@ const char* to_string(ModelFitStatus s) {
   return "?";
 }
 
+double effect_parameter_count(const std::string& effect, const ModelFit& fit, double Ts) {
+  std::vector<NamedValue> p;
+  for (const auto& e : fit.effects)
+    if (e.name == effect) p = e.parameters;
+  auto param = [&p](const char* name, double fallback) {
+    for (const auto& v : p)
+      if (v.name == name) return v.value;
+    return fallback;
+  };
+  if (effect == "preisach") return std::max(1.0, param("nonzero_weights", 1.0));
+  if (effect == "disturbance") {
+    const double h = param("knot_spacing", 0.0) / Ts;
+    return h > 0 ? static_cast<double>(fit.estimation_end - fit.first_sample) / h + 1.0 : 10.0;
+  }
+  if (effect == "integrator") return 0.0;
+  if (effect == "order") return std::max(1.0, param("na", 2) + param("nb", 2) - 3.0);
+  if (effect == "stiction" || effect == "saturation")
+    return static_cast<double>(std::max<std::size_t>(1, p.size()));
+  return 1.0;  // deadband, characteristic, actuator-lag, delay
+}
+
 LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, std::size_t N) {
   LinearOptions lo;
   lo.range = opt.structure;

@@ -133,6 +133,8 @@ nlohmann::json whole_record_json(const WholeRecordTest& w) {
           {"load_bic_margin", num_json(w.load_bic_margin)},
           {"rival", w.rival},
           {"rival_fitness_percent", num_json(w.rival_fitness)},
+          {"rival_bic_margin", num_json(w.rival_bic_margin)},
+          {"preferred", w.preferred},
           {"summary", w.summary}};
 }
 
@@ -152,6 +154,8 @@ WholeRecordTest whole_record_from_json(const nlohmann::json& j) {
   w.load_bic_margin = num("load_bic_margin");
   w.rival = j.value("rival", std::string());
   w.rival_fitness = num("rival_fitness_percent");
+  w.rival_bic_margin = num("rival_bic_margin");
+  w.preferred = j.value("preferred", std::string());
   w.summary = j.value("summary", std::string());
   return w;
 }

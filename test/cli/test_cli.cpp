@@ -194,9 +194,10 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   for (const char* k : {"oscillating", "period_s", "phase_deg", "model_share", "integrating",
                         "stick_slip", "apparent_band", "summary"})
     CHECK_MESSAGE(j["limit_cycle"].contains(k), k);
-  for (const char* k : {"tested", "confirmed", "memory_model", "start_fitness_percent",
-                        "memory_fitness_percent", "relative_gain", "load_fitness_percent",
-                        "load_bic_margin", "rival", "rival_fitness_percent", "summary"})
+  for (const char* k :
+       {"tested", "confirmed", "memory_model", "start_fitness_percent", "memory_fitness_percent",
+        "relative_gain", "load_fitness_percent", "load_bic_margin", "rival",
+        "rival_fitness_percent", "rival_bic_margin", "preferred", "summary"})
     CHECK_MESSAGE(j["whole_record"].contains(k), k);
   // The climb found the stiction: the whole-record test was not needed.
   CHECK(j["whole_record"]["tested"] == false);

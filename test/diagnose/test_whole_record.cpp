@@ -38,6 +38,8 @@ TEST_CASE("a sticky valve is confirmed on the whole record, ahead of a load and 
     CHECK(w.relative_gain >= 0.3);
     CHECK(w.load_bic_margin > 0);
     CHECK(w.memory_fitness > w.rival_fitness);
+    CHECK(w.rival_bic_margin > 0);  // ahead of every memoryless effect with parameters counted
+    CHECK(w.preferred.empty());
     CHECK(w.memory_fitness > w.start_fitness);
     REQUIRE(!w.memory_effects.empty());
     CHECK(w.memory_effects.front().name == "stiction");
@@ -60,6 +62,7 @@ TEST_CASE("a compensated load step imitates a stuck valve, and the charged load 
     CHECK(w.relative_gain >= 0.3);
     CHECK(w.load_bic_margin < 0);
     CHECK(w.load_fitness > w.memory_fitness);
+    CHECK(w.preferred == "disturbance");
     CHECK(w.summary.find("slow load fits it better") != std::string::npos);
   }
 }

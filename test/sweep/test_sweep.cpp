@@ -82,6 +82,7 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   a.whole_record.load_bic_margin = 57.0;
   a.whole_record.rival = "characteristic";
   a.whole_record.rival_fitness = 36.0;
+  a.whole_record.rival_bic_margin = 41.0;
   a.whole_record.summary = "on the whole record";
   a.severity = severity(a);
   const LoopAssessment b = assessment_from_json(nlohmann::json::parse(assessment_json(a).dump()));
@@ -110,6 +111,8 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(b.whole_record.load_bic_margin == 57.0);
   CHECK(b.whole_record.rival == "characteristic");
   CHECK(b.whole_record.rival_fitness == 36.0);
+  CHECK(b.whole_record.rival_bic_margin == 41.0);
+  CHECK(b.whole_record.preferred.empty());
   CHECK(b.whole_record.summary == "on the whole record");
   CHECK(b.severity == doctest::Approx(6 + 1 + 1.25));
 
@@ -121,6 +124,7 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(std::isnan(m.stiction_percent));
   CHECK_FALSE(m.whole_record.tested);
   CHECK(std::isnan(m.whole_record.relative_gain));
+  CHECK(std::isnan(m.whole_record.rival_bic_margin));
   CHECK(std::isnan(m.fitness_percent));
   CHECK_THROWS_WITH_AS(assessment_from_json(nlohmann::json{{"verdict", "x"}}),
                        "a loop's result has no 'loop' name", std::runtime_error);
