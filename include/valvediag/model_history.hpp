@@ -26,6 +26,11 @@ std::string history_path_for(const std::string& data_path);
 std::vector<HistoryEntry> load_history(const std::string& path);
 // Appends and rewrites the file (atomically: a temporary file renamed over it).
 void append_history(const std::string& path, const std::vector<HistoryEntry>& entries);
+// The same for commands whose result stands without the history (fit, diagnose, report): false
+// with the reason in `why` when the file cannot be read or written (a read-only data folder),
+// instead of failing the command after its result was printed.
+bool try_append_history(const std::string& path, const std::vector<HistoryEntry>& entries,
+                        std::string& why);
 HistoryEntry history_entry(const ModelFit& fit, const std::string& command);
 // Now, UTC, ISO 8601 (the entries' time stamps).
 std::string utc_timestamp();

@@ -91,9 +91,13 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       for (const auto& s : r.steps)
         entries.push_back(history_entry(s.fit, a->autoclimb ? "diagnose --auto" : "diagnose"));
       const std::string path = history_path_for(data_name(a->data));
-      append_history(path, entries);
-      std::cout << "model history: " << path << " (valvediag ladder " << data_name(a->data)
-                << ")\n";
+      std::string why;
+      if (try_append_history(path, entries, why))
+        std::cout << "model history: " << path << " (valvediag ladder " << data_name(a->data)
+                  << ")\n";
+      else
+        std::cerr << "warning: " << why
+                  << "; the diagnosis above stands (--no-history skips this)\n";
     }
     exit_code = kOk;
   });

@@ -124,8 +124,11 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
     std::cout << "wrote " << a.series << "\n";
   }
   if (!a.no_history && f.status != ModelFitStatus::NoStableModel) {
-    append_history(history, {history_entry(f, "fit")});
-    std::cout << "model history: " << history << "\n";
+    std::string why;
+    if (try_append_history(history, {history_entry(f, "fit")}, why))
+      std::cout << "model history: " << history << "\n";
+    else
+      std::cerr << "warning: " << why << "; the fit above stands (--no-history skips this)\n";
   }
   return f.status == ModelFitStatus::NoStableModel ? kNoModel : kOk;
 }

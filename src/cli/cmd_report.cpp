@@ -184,8 +184,11 @@ void add_report(CLI::App& app, int& exit_code) {
       return;
     }
     if (!a->no_history && (ladder.empty() || ladder.back().model != to_string(fit.spec))) {
-      append_history(history, {history_entry(fit, "report")});
-      ladder = load_history(history);
+      std::string why;
+      if (try_append_history(history, {history_entry(fit, "report")}, why))
+        ladder = load_history(history);
+      else
+        std::cerr << "warning: " << why << "; the report is written without it\n";
     }
     ReportContent c;
     c.data = &d;

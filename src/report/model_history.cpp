@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -93,6 +94,20 @@ void append_history(const std::string& path, const std::vector<HistoryEntry>& en
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0)
     throw std::runtime_error("cannot replace the model history " + path);
+}
+
+bool try_append_history(const std::string& path, const std::vector<HistoryEntry>& entries,
+                        std::string& why) {
+  try {
+    append_history(path, entries);
+    return true;
+  } catch (const std::exception& e) {
+    std::error_code ec;  // a partial temporary file is not left behind
+    if (std::filesystem::is_regular_file(path + ".tmp", ec))
+      std::filesystem::remove(path + ".tmp", ec);
+    why = e.what();
+    return false;
+  }
 }
 
 HistoryEntry history_entry(const ModelFit& fit, const std::string& command) {

@@ -4,10 +4,13 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -223,6 +226,23 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   auto none = run("ladder " + tmp("nothing-here.csv"));
   CHECK(none.status == 2);
   CHECK(none.out.find("diagnose") != std::string::npos);
+}
+
+TEST_CASE("a model history that cannot be written is a warning: the result stands") {
+  // A read-only data folder (a share, ../shared in CI): stand-in, the temporary file's name is
+  // taken by a directory, so the history cannot be written there (root ignores permissions).
+  const std::string csv = tmp("ro.csv");
+  REQUIRE(run("simulate --scenario paper-ex1-linear --samples 600 --out " + csv).status == 0);
+  std::remove((csv + ".history.json").c_str());
+  fs::create_directories(csv + ".history.json.tmp");
+  auto r = run("fit " + csv + " --model linear");
+  CHECK(r.status == 0);
+  CHECK(r.out.find("fitness:") != std::string::npos);
+  CHECK(r.out.find("warning: cannot write the model history") != std::string::npos);
+  CHECK(r.out.find("--no-history") != std::string::npos);
+  CHECK(fs::is_directory(csv + ".history.json.tmp"));  // not removed: it is not ours
+  CHECK_FALSE(fs::exists(csv + ".history.json"));
+  fs::remove(csv + ".history.json.tmp");
 }
 
 TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
