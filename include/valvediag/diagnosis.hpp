@@ -15,6 +15,7 @@
 #include "valvediag/model_fit.hpp"
 #include "valvediag/model_spec.hpp"
 #include "valvediag/residual_analysis.hpp"
+#include "valvediag/valve_travel.hpp"
 #include "valvediag/whole_record_test.hpp"
 
 namespace valvediag {
@@ -67,6 +68,9 @@ struct Diagnosis {
   // cycle found a valve with memory: a valve that slips once or twice in the record leaves the
   // held-out part too few slips to confirm its band.
   WholeRecordTest whole_record;
+  // The valve-travel test (valve_travel.hpp), filled in by the caller when MV is recorded: the
+  // measured valve position outweighs what the closed-loop models suggest about friction.
+  ValveTravel valve_travel;
   const DiagnosisStep& last() const { return steps.back(); }
 };
 

@@ -19,6 +19,9 @@ LimitCycle limit_cycle_from_json(const nlohmann::json& j);
 // The whole-record test's figures (whole_record_test.hpp), likewise.
 nlohmann::json whole_record_json(const WholeRecordTest& w);
 WholeRecordTest whole_record_from_json(const nlohmann::json& j);
+// The valve-travel test's figures (valve_travel.hpp), likewise.
+nlohmann::json valve_travel_json(const ValveTravel& v);
+ValveTravel valve_travel_from_json(const nlohmann::json& j);
 std::string format_ladder(const std::vector<HistoryEntry>& entries);
 
 // A fit of a composable model (fit --model/--add/--remove): summary and JSON.

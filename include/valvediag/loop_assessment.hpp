@@ -42,6 +42,7 @@ struct LoopAssessment {
   LoopHealth health;
   LimitCycle limit_cycle;        // the diagnosis's limit-cycle test (not run: not oscillating)
   WholeRecordTest whole_record;  // the diagnosis's whole-record test (not run: not needed)
+  ValveTravel valve_travel;      // the valve-travel test (not run: MV not recorded)
   double severity = 0.0;         // ranking key, higher first (see assess_loop)
   double elapsed_s = 0.0;
   std::string error;   // the analysis failed: exception text, timeout, crash

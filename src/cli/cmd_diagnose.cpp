@@ -8,6 +8,7 @@
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/valve_travel.hpp"
 
 namespace valvediag::cli {
 
@@ -65,8 +66,9 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     o.candidates = a->candidates;
     for (const auto& c : o.candidates) (void)parse_effect(c);  // unknown names are user errors
     const double Ts = d.sample_period();
-    const Diagnosis r =
+    Diagnosis r =
         a->autoclimb ? diagnose_auto(d.op, d.pv, Ts, spec, o) : diagnose(d.op, d.pv, Ts, spec, o);
+    if (d.has_mv()) r.valve_travel = check_valve_travel(d.op, d.mv, Ts);
     std::cout << format_diagnosis(r, d.t);
     // The stiction size the sweep reports, for one loop without a site config.
     const FrictionSize fr = friction_size(r, d.op, d.pv);

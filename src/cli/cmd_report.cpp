@@ -12,6 +12,7 @@
 #include "valvediag/data_checks.hpp"
 #include "valvediag/html_report.hpp"
 #include "valvediag/model_history.hpp"
+#include "valvediag/valve_travel.hpp"
 #include "valvediag/verdict.hpp"
 
 namespace valvediag::cli {
@@ -159,6 +160,7 @@ void add_report(CLI::App& app, int& exit_code) {
       o.validation_fraction = a->validate;
       try {
         diag = diagnose(d.op, d.pv, Ts, *spec, o);
+        if (d.has_mv()) diag.valve_travel = check_valve_travel(d.op, d.mv, Ts);
         fit = diag.steps.front().fit;
         where = diag.steps.front().residual;
         diagnosed = true;

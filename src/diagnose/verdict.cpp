@@ -12,7 +12,22 @@
 
 namespace valvediag {
 
+namespace {
+std::string model_verdict(const Diagnosis& d);
+}
+
 std::string verdict(const Diagnosis& d) {
+  const std::string from_model = model_verdict(d);
+  const ValveTravel& t = d.valve_travel;
+  if (!t.decided) return from_model;
+  // The measured position shows the friction itself; when it shows none, a memory the closed-loop
+  // models found lies outside the valve, and a static curve (flow against travel) may still hold.
+  if (t.verdict == "stiction" || t.verdict == "deadband") return t.verdict;
+  return from_model == "stiction" || from_model == "deadband" ? "no-valve-problem" : from_model;
+}
+
+namespace {
+std::string model_verdict(const Diagnosis& d) {
   // The valve part of the final model (the climbed ladder), or the top supported finding.
   ModelSpec m = d.last().fit.spec;
   if (d.steps.size() == 1 && !d.last().findings.empty()) {
@@ -36,6 +51,7 @@ std::string verdict(const Diagnosis& d) {
     return "other-nonlinearity";
   return "no-valve-problem";
 }
+}  // namespace
 
 namespace {
 

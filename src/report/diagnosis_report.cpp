@@ -89,6 +89,7 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
   }
   if (d.limit_cycle.oscillating) o << "limit cycle: " << d.limit_cycle.summary << "\n";
   if (d.whole_record.tested) o << "whole record: " << d.whole_record.summary << "\n";
+  if (!d.valve_travel.summary.empty()) o << "valve travel: " << d.valve_travel.summary << "\n";
   o << "verdict:   " << verdict(d) << "\n";
   o << d.conclusion << "\n";
   return o.str();
@@ -160,6 +161,50 @@ WholeRecordTest whole_record_from_json(const nlohmann::json& j) {
   return w;
 }
 
+nlohmann::json valve_travel_json(const ValveTravel& v) {
+  return {{"tested", v.tested},
+          {"decided", v.decided},
+          {"verdict", v.verdict},
+          {"fs_percent", num_json(v.fs_percent)},
+          {"fd_percent", num_json(v.fd_percent)},
+          {"slip_jump_percent", num_json(v.jump_percent)},
+          {"lag_s", num_json(v.lag_s)},
+          {"gain", num_json(v.gain)},
+          {"mv_noise", num_json(v.mv_noise)},
+          {"follow_fitness_percent", num_json(v.follow_fitness_percent)},
+          {"follow_validation_fitness_percent", num_json(v.follow_validation_fitness_percent)},
+          {"friction_fitness_percent", num_json(v.friction_fitness_percent)},
+          {"friction_validation_fitness_percent", num_json(v.friction_validation_fitness_percent)},
+          {"error_share", num_json(v.error_share)},
+          {"validation_error_share", num_json(v.validation_error_share)},
+          {"summary", v.summary}};
+}
+
+ValveTravel valve_travel_from_json(const nlohmann::json& j) {
+  ValveTravel v;
+  if (!j.is_object()) return v;
+  auto num = [&j](const char* k) {
+    return j.contains(k) && j[k].is_number() ? j[k].get<double>() : ValveTravel::kNaN;
+  };
+  v.tested = j.value("tested", false);
+  v.decided = j.value("decided", false);
+  v.verdict = j.value("verdict", std::string());
+  v.fs_percent = num("fs_percent");
+  v.fd_percent = num("fd_percent");
+  v.jump_percent = num("slip_jump_percent");
+  v.lag_s = num("lag_s");
+  v.gain = num("gain");
+  v.mv_noise = num("mv_noise");
+  v.follow_fitness_percent = num("follow_fitness_percent");
+  v.follow_validation_fitness_percent = num("follow_validation_fitness_percent");
+  v.friction_fitness_percent = num("friction_fitness_percent");
+  v.friction_validation_fitness_percent = num("friction_validation_fitness_percent");
+  v.error_share = num("error_share");
+  v.validation_error_share = num("validation_error_share");
+  v.summary = j.value("summary", std::string());
+  return v;
+}
+
 nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) {
   using nlohmann::json;
   const auto& s = d.last();
@@ -179,6 +224,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) 
   j["verdict"] = verdict(d);
   j["limit_cycle"] = limit_cycle_json(d.limit_cycle);
   j["whole_record"] = whole_record_json(d.whole_record);
+  j["valve_travel"] = valve_travel_json(d.valve_travel);
   for (const auto& e : s.fit.effects)
     if (e.name == "stiction") {
       json st = json::object();

@@ -452,39 +452,53 @@ PlotJob signature_plot(const ReportContent& c) {
   const LoopData& d = *c.data;
   const ModelFit& f = *c.fit;
   Plot p(470, 420);
-  // The path OP -> x_hat: consecutive points closer than 0.2 % of both ranges are dropped.
-  const auto [umin, umax] = std::minmax_element(d.op.begin(), d.op.end());
-  const auto [xmin, xmax] = std::minmax_element(f.x_hat.begin(), f.x_hat.end());
-  const double du = 0.002 * (*umax - *umin), dx = 0.002 * (*xmax - *xmin);
-  std::vector<std::string> rows;
-  double lu = std::nan(""), lx = std::nan("");
-  for (std::size_t k = 0; k < d.size(); ++k) {
-    const double u = d.op[k], x = f.x_hat[k];
-    if (!(std::abs(u - lu) <= du && std::abs(x - lx) <= dx) || k + 1 == d.size()) {
-      rows.push_back(dnum(u) + " " + dnum(x));
-      lu = u;
-      lx = x;
+  // A path OP -> y: consecutive points closer than 0.2 % of both ranges are dropped.
+  auto path = [&](const std::vector<double>& y) {
+    const auto [umin, umax] = std::minmax_element(d.op.begin(), d.op.end());
+    const auto [ymin, ymax] = std::minmax_element(y.begin(), y.end());
+    const double du = 0.002 * (*umax - *umin), dy = 0.002 * (*ymax - *ymin);
+    std::vector<std::string> rows;
+    double lu = std::nan(""), ly = std::nan("");
+    for (std::size_t k = 0; k < d.size(); ++k) {
+      const double u = d.op[k], x = y[k];
+      if (!(std::abs(u - lu) <= du && std::abs(x - ly) <= dy) || k + 1 == d.size()) {
+        rows.push_back(dnum(u) + " " + dnum(x));
+        lu = u;
+        ly = x;
+      }
     }
-  }
-  if (rows.size() > 6000) {  // a very long noisy record: every m-th point
-    std::vector<std::string> kept;
-    const std::size_t m = rows.size() / 3000 + 1;
-    for (std::size_t i = 0; i < rows.size(); i += m) kept.push_back(rows[i]);
-    rows.swap(kept);
-  }
-  const std::string b = p.block(rows);
+    if (rows.size() > 6000) {  // a very long noisy record: every m-th point
+      std::vector<std::string> kept;
+      const std::size_t m = rows.size() / 3000 + 1;
+      for (std::size_t i = 0; i < rows.size(); i += m) kept.push_back(rows[i]);
+      rows.swap(kept);
+    }
+    return p.block(rows);
+  };
+  const std::string b = path(f.x_hat);
   const bool pre = f.preisach.has_value();
+  const bool mv = d.has_mv();
+  const std::string m = mv ? path(d.mv) : "";
   p.out() << "set xlabel 'OP (%)'\nset ylabel '"
-          << (pre ? "estimated valve position (model units)" : "estimated valve position (%)")
-          << "'\n"
-          << "plot " << b << " with lines lw 1 lc rgb '#1f5fa8' title 'OP -> valve position'\n";
-  return {"plot-signature", "Valve signature: OP vs estimated valve position",
-          pre ? "The identified Preisach valve driven by the recorded OP (x = gamma(u)' mu, "
-                "||b|| = 1: the scale is carried by the linear block). Flat stretches are "
-                "where the valve sticks."
-              : "The identified valve effects driven by the recorded OP. Flat stretches are "
-                "where the valve sticks.",
-          p.script(), ""};
+          << (pre ? "estimated valve position (model units)" : "valve position (%)") << "'\n";
+  // The Preisach output is in model units: the measured position then gets its own axis.
+  if (mv && pre) p.out() << "set y2label 'measured valve position (%)'\nset y2tics\n";
+  p.out() << "plot ";
+  if (mv)
+    p.out() << m << " with lines lw 1 lc rgb '#999999' title 'OP -> measured position (MV)'"
+            << (pre ? " axes x1y2" : "") << ", ";
+  p.out() << b << " with lines lw 1 lc rgb '#1f5fa8' title 'OP -> estimated position'\n";
+  std::string cap =
+      pre ? "The identified Preisach valve driven by the recorded OP (x = gamma(u)' mu, "
+            "||b|| = 1: the scale is carried by the linear block). Flat stretches are "
+            "where the valve sticks."
+          : "The identified valve effects driven by the recorded OP. Flat stretches are "
+            "where the valve sticks.";
+  if (mv)
+    cap +=
+        " Grey: the recorded valve position, from which the valve-travel test reads the "
+        "friction directly.";
+  return {"plot-signature", "Valve signature: OP vs valve position", cap, p.script(), ""};
 }
 
 PlotJob preisach_plot(const ReportContent& c) {
@@ -727,6 +741,8 @@ void header_section(std::ostringstream& o, const ReportContent& c) {
     row(o, "limit cycle", e(c.diagnosis->limit_cycle.summary));
   if (c.diagnosis != nullptr && c.diagnosis->whole_record.tested)
     row(o, "whole record", e(c.diagnosis->whole_record.summary));
+  if (c.diagnosis != nullptr && !c.diagnosis->valve_travel.summary.empty())
+    row(o, "valve travel", e(c.diagnosis->valve_travel.summary));
   if (c.where != nullptr)
     row(o, "residual",
         "RMS " + e(num(c.where->rms, 3)) + ", white-noise level " +

@@ -77,6 +77,7 @@ json assessment_json(const LoopAssessment& a) {
                  {"op_span_percent", number(h.op_span_percent)}};
   j["limit_cycle"] = limit_cycle_json(a.limit_cycle);
   j["whole_record"] = whole_record_json(a.whole_record);
+  j["valve_travel"] = valve_travel_json(a.valve_travel);
   j["elapsed_s"] = a.elapsed_s;
   j["error"] = a.error;
   j["report"] = a.report;
@@ -120,6 +121,7 @@ LoopAssessment assessment_from_json(const json& j) {
   }
   if (j.contains("limit_cycle")) a.limit_cycle = limit_cycle_from_json(j["limit_cycle"]);
   if (j.contains("whole_record")) a.whole_record = whole_record_from_json(j["whole_record"]);
+  if (j.contains("valve_travel")) a.valve_travel = valve_travel_from_json(j["valve_travel"]);
   a.elapsed_s = number_of(j, "elapsed_s");
   a.error = text_of(j, "error");
   a.report = text_of(j, "report");
@@ -196,7 +198,8 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
   std::ostringstream o;
   o << "rank,loop,verdict,severity,stiction_percent,slip_jump_percent,model,fitness_percent,"
        "validation_fitness_percent,first_missing,oscillating,period_s,op_reversals_per_hour,"
-       "op_travel_percent_per_hour,time_at_limits_percent,samples,source,reason,error\n";
+       "op_travel_percent_per_hour,time_at_limits_percent,samples,source,reason,error,"
+       "valve_travel\n";
   int rank = 0;
   auto n = [](double v) { return std::isfinite(v) ? fmt(v, 4) : std::string(); };
   for (const auto& a : loops)
@@ -207,7 +210,8 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
       << n(a.health.oscillating ? a.health.period_s : LoopAssessment::kNaN) << ","
       << n(a.health.op_reversals_per_hour) << "," << n(a.health.op_travel_percent_per_hour) << ","
       << n(a.health.time_at_limits_percent) << "," << a.health.samples << "," << csv_field(a.source)
-      << "," << csv_field(a.reason) << "," << csv_field(a.error) << "\n";
+      << "," << csv_field(a.reason) << "," << csv_field(a.error) << ","
+      << (a.valve_travel.decided ? a.valve_travel.verdict : "") << "\n";
   return o.str();
 }
 

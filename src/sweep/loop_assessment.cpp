@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "valvediag/stiction_quantification.hpp"
+#include "valvediag/valve_travel.hpp"
 #include "valvediag/verdict.hpp"
 
 namespace valvediag {
@@ -65,6 +66,9 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
 
 FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
                            const std::vector<double>& pv, const OpRange& range) {
+  const ValveTravel& t = d.valve_travel;  // measured position: its figures, or no friction
+  if (t.decided && t.verdict == "no-valve-problem") return {};
+  if (t.decided && std::isfinite(t.fs_percent)) return {t.fs_percent, t.jump_percent};
   FrictionSize a = friction_size(d.last().fit, op, pv, range);
   if (std::isnan(a.band_percent) && d.whole_record.confirmed) {
     ModelFit whole;  // the friction figures of the whole-record memory fit
@@ -132,8 +136,12 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
     a.error = std::string("the diagnosis failed: ") + e.what();
     return finish();
   }
+  if (d.has_mv())
+    dg.valve_travel = check_valve_travel(d.op, d.mv, d.sample_period(),
+                                         {.op_lo = opt.range.lo, .op_hi = opt.range.hi});
   const ModelFit& best = dg.last().fit;
   a.verdict = verdict(dg);
+  a.valve_travel = dg.valve_travel;
   a.limit_cycle = dg.limit_cycle;
   a.whole_record = dg.whole_record;
   a.model = to_string(best.spec);

@@ -228,6 +228,48 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   CHECK(none.out.find("diagnose") != std::string::npos);
 }
 
+// Issue 5: a recorded valve position decides friction. On this second-order loop with a healthy
+// valve the closed-loop climb fits a Preisach valve (a memory that mimics the extra lag and the
+// load the controller fights); the measured position follows OP, so the verdict is no valve
+// problem, and with the position left out (--mv none) the model's verdict stands.
+TEST_CASE("diagnose reads friction from a recorded valve position") {
+  const std::string csv = tmp("travel.csv");
+  REQUIRE(run("simulate --scenario second-order --seed 5 --out " + csv).status == 0);
+  auto r = run("diagnose " + csv + " --auto --no-history --json " + tmp("travel.json"));
+  REQUIRE(r.status == 0);
+  CHECK(r.out.find("valve travel: the measured valve position follows OP") != std::string::npos);
+  CHECK(r.out.find("verdict:   no-valve-problem") != std::string::npos);
+  std::ifstream f(tmp("travel.json"));
+  const auto j = nlohmann::json::parse(f);
+  CHECK(j["verdict"] == "no-valve-problem");
+  for (const char* k :
+       {"tested", "decided", "verdict", "fs_percent", "fd_percent", "slip_jump_percent", "lag_s",
+        "gain", "mv_noise", "follow_fitness_percent", "follow_validation_fitness_percent",
+        "friction_fitness_percent", "friction_validation_fitness_percent", "error_share",
+        "validation_error_share", "summary"})
+    CHECK_MESSAGE(j["valve_travel"].contains(k), k);
+  CHECK(j["valve_travel"]["decided"] == true);
+  CHECK(j["valve_travel"]["verdict"] == "no-valve-problem");
+  CHECK(j["stiction_percent"].is_null());  // no friction: no size
+  auto none = run("diagnose " + csv + " --auto --no-history --mv none --json " + tmp("nomv.json"));
+  REQUIRE(none.status == 0);
+  CHECK(none.out.find("valve travel:") == std::string::npos);
+  std::ifstream g(tmp("nomv.json"));
+  const auto k = nlohmann::json::parse(g);
+  CHECK(k["valve_travel"]["tested"] == false);
+  CHECK(k["verdict"] == "stiction");  // the closed-loop models alone (README: simulated loops)
+  // A sticky valve with its position recorded: He's figures from OP -> MV.
+  REQUIRE(run("simulate --scenario stenman --seed 1 --out " + tmp("sten.csv")).status == 0);
+  auto s = run("diagnose " + tmp("sten.csv") + " --auto --no-history --json " + tmp("sten.json"));
+  REQUIRE(s.status == 0);
+  std::ifstream h(tmp("sten.json"));
+  const auto l = nlohmann::json::parse(h);
+  CHECK(l["verdict"] == "stiction");
+  CHECK(l["valve_travel"]["fs_percent"].get<double>() == doctest::Approx(3.0).epsilon(0.1));
+  CHECK(l["stiction_percent"].get<double>() == doctest::Approx(3.0).epsilon(0.1));
+  CHECK(l["slip_jump_percent"].get<double>() == doctest::Approx(3.0).epsilon(0.1));
+}
+
 TEST_CASE("a model history that cannot be written is a warning: the result stands") {
   // A read-only data folder (a share, ../shared in CI): stand-in, the temporary file's name is
   // taken by a directory, so the history cannot be written there (root ignores permissions).

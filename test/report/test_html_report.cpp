@@ -227,6 +227,30 @@ TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
   CHECK(html_report(c).html.find(">limit cycle<") == std::string::npos);
 }
 
+TEST_CASE("a recorded valve position: its signature beside the model's, and the test's row") {
+  Fixture fx("paper-ex1", "preisach", 1500);
+  REQUIRE(fx.d.has_mv());
+  Diagnosis dg;
+  dg.steps.push_back({fx.fit, fx.where, {}});
+  dg.valve_travel.tested = dg.valve_travel.decided = true;
+  dg.valve_travel.verdict = "stiction";
+  dg.valve_travel.summary = "the measured valve position has friction <8.4>";
+  ReportContent c = fx.content();
+  c.diagnosis = &dg;
+  const std::string h = html_report(c).html;
+  const std::string sig = figure(h, "plot-signature");
+  CHECK(sig.find("measured position (MV)") != std::string::npos);
+  CHECK(sig.find("measured valve position (%)") != std::string::npos);  // own axis: Preisach units
+  CHECK(sig.find("valve-travel test") != std::string::npos);
+  CHECK(h.find(">valve travel<") != std::string::npos);
+  CHECK(h.find("has friction &lt;8.4&gt;") != std::string::npos);
+  fx.d.mv.clear();  // not recorded: the model's signature alone, no row
+  dg.valve_travel = {};
+  const std::string n = html_report(c).html;
+  CHECK(figure(n, "plot-signature").find("measured position (MV)") == std::string::npos);
+  CHECK(n.find(">valve travel<") == std::string::npos);
+}
+
 TEST_CASE("a model without a Preisach valve: a note in place of the triangle") {
   Fixture fx("paper-ex1", "stiction", 1500);
   const HtmlReport r = html_report(fx.content());
