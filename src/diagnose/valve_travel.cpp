@@ -28,7 +28,9 @@ double quantile(std::vector<double> v, double p) {
 }
 
 // White-noise sigma from the sample-to-sample changes (a moving valve adds to it: an upper bound).
-double noise_sigma(const std::vector<double>& x) {
+// Not limit_cycle.hpp's noise_sigma (second differences): this test's thresholds were measured with
+// this one.
+double step_noise_sigma(const std::vector<double>& x) {
   std::vector<double> d;
   d.reserve(x.size());
   for (std::size_t i = 1; i < x.size(); ++i) d.push_back(std::abs(x[i] - x[i - 1]));
@@ -325,7 +327,7 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   const auto [mv_min, mv_max] = std::minmax_element(mv.begin(), mv.end());
   const double op_span = *op_max - *op_min, mv_span = *mv_max - *mv_min;
   const double op_range = quantile(op, 0.95) - quantile(op, 0.05);
-  v.mv_noise = noise_sigma(mv);
+  v.mv_noise = step_noise_sigma(mv);
   v.tested = true;
 
   // A valve that stays put while OP sweeps far beyond MV's noise: stuck, or a dead transmitter.
@@ -347,11 +349,11 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   }
 
   const std::size_t n = op.size();
-  const auto n_est = std::max<std::size_t>(
-      opt.min_samples / 2, static_cast<std::size_t>(std::floor((1.0 - opt.validation_fraction) *
-                                                               static_cast<double>(n))));
-  const Positioner pos(op, mv, Ts, std::min(n_est, n), travel_limits(op, mv, v.mv_noise, width),
-                       opt.map_degree);
+  const std::size_t n_est = std::min(
+      n, std::max<std::size_t>(opt.min_samples / 2,
+                               static_cast<std::size_t>(std::floor((1.0 - opt.validation_fraction) *
+                                                                   static_cast<double>(n)))));
+  const Positioner pos(op, mv, Ts, n_est, travel_limits(op, mv, v.mv_noise, width), opt.map_degree);
   const double tau_hi = std::max(opt.max_lag_s, Ts);
   const double tau_lo = std::min(0.5 * Ts, tau_hi);
   auto fitness = [&](const Evaluated& e, std::size_t from, std::size_t to) {
@@ -455,6 +457,8 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
       std::isnan(v.validation_error_share) ? share_est : v.validation_error_share;
   const double band = fs + fd;  // OP travel after a reversal before the valve moves
   const bool above_resolution = band * to_pct >= opt.min_band_percent;
+  v.lag_s = follow.tau;  // the follow model's, unless friction is found
+  v.gain = ef.gain;
   const bool explains_est = share_est >= opt.min_error_share;
   const bool explains_val = share_val >= opt.min_error_share;
   const bool explains = explains_est && explains_val;
@@ -462,8 +466,6 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   // with few reversals, or a fit to noise): the closed-loop models decide. "Follows OP" needs
   // friction to fail on both parts, or a band under the resolution.
   if (explains_est != explains_val && above_resolution) {
-    v.lag_s = follow.tau;
-    v.gain = ef.gain;
     v.summary = fmt(
         "the valve-travel test is inconclusive: friction (He's fs %.2f, fd %.2f) explains "
         "%.0f / %.0f %% of the error a valve that follows OP leaves (estimation / held out), "
@@ -490,8 +492,6 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
     return v;
   }
   v.verdict = "no-valve-problem";
-  v.lag_s = follow.tau;
-  v.gain = ef.gain;
   std::string why;
   if (!explains)
     why = fmt("friction explains only %.0f / %.0f %% of the error left (estimation / held out)",
