@@ -7,18 +7,13 @@
 #include <numeric>
 #include <unsupported/Eigen/FFT>
 
+#include "valvediag/text_stats.hpp"
+
 namespace valvediag {
 
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
 
 // Normalised autocorrelation of x about its mean for lags 0..N-1, through one FFT (zero-padded:
 // no wrap-around). Empty for a constant signal.
@@ -57,12 +52,6 @@ std::complex<double> cycle_amplitude(const std::vector<double>& x, std::size_t b
     s += (x[b + k] - mean) * std::complex<double>(std::cos(w), std::sin(w));
   }
   return 2.0 * s / m;
-}
-
-std::string fmt(const char* f, double a = 0, double b = 0, double c = 0) {
-  char buf[480];
-  std::snprintf(buf, sizeof buf, f, a, b, c);
-  return buf;
 }
 
 }  // namespace
@@ -163,8 +152,8 @@ LimitCycle limit_cycle_test(const std::vector<double>& u, const std::vector<doub
   c.odd = s > std::sqrt(0.5);
   c.apparent_band = 2.0 * c.op_amplitude * s;
   if (model_ok) c.model_share = 1.0 - std::sqrt(See / Syy);
-  const std::string head = fmt("PV oscillates with a period of %.0f s and lies %.0f deg from OP",
-                               c.period_s, c.phase_deg);
+  const std::string head = strprintf(
+      "PV oscillates with a period of %.0f s and lies %.0f deg from OP", c.period_s, c.phase_deg);
   const bool op_moves = c.op_amplitude > opt.min_op_amplitude_noise * noise_sigma(u);
   if (integrating)
     c.summary = head +
@@ -181,23 +170,26 @@ LimitCycle limit_cycle_test(const std::vector<double>& u, const std::vector<doub
                 " (odd), but no model driven by OP was fitted (no stable linear part), so "
                 "it is not known whether OP drives the cycle";
   else if (!(c.model_share >= opt.min_model_share))
-    c.summary = head + fmt(" (odd), but the model driven by OP carries only %.0f %% of PV's cycle: "
+    c.summary = head + strprintf(
+                           " (odd), but the model driven by OP carries only %.0f %% of PV's cycle: "
                            "an oscillation from outside the loop, not the valve",
                            100 * c.model_share);
   else if (!(c.memory_gain >= opt.min_memory_gain))
-    c.summary = head + fmt(" (odd), but no valve model with memory gains on held-out data (%+.1f "
+    c.summary = head + strprintf(
+                           " (odd), but no valve model with memory gains on held-out data (%+.1f "
                            "points): a slow oscillation the controller compensates, as one from "
                            "outside the loop, looks the same",
                            c.memory_gain);
   else if (!c.rival.empty())
     c.summary = head + " (odd), but `" + c.rival +
                 "` explains the data clearly better than a valve with memory (" +
-                fmt("%+.1f against %+.1f points", trials.rival_gain, c.memory_gain) +
+                strprintf("%+.1f against %+.1f points", trials.rival_gain, c.memory_gain) +
                 "): not a stick-slip cycle";
   else {
     c.stick_slip = true;
     c.summary =
-        head + fmt(" (an odd OP-PV cross-correlation, Horch's stick-slip signature): the "
+        head + strprintf(
+                   " (an odd OP-PV cross-correlation, Horch's stick-slip signature): the "
                    "controller integrates through the cycle, OP drives %.0f %% of it and a "
                    "valve with memory gains %+.1f points; apparent stiction %.3g (OP units)",
                    100 * c.model_share, c.memory_gain, c.apparent_band);

@@ -6,19 +6,14 @@
 #include <numeric>
 #include <stdexcept>
 
+#include "valvediag/text_stats.hpp"
+
 namespace valvediag {
 
 namespace {
 
 double clamp01(double v) {
   return std::isfinite(v) ? std::clamp(v, 0.0, 1.0) : 0.0;
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
 }
 
 // Robust standard deviation of the white part: MAD of the first difference / sqrt(2).
@@ -29,12 +24,6 @@ double noise_level(const std::vector<double>& r) {
   const double m = median(d);
   for (auto& v : d) v = std::abs(v - m);
   return 1.4826 * median(d) / std::sqrt(2.0);
-}
-
-std::string fmt(const char* f, double a, double b = 0, double c = 0) {
-  char buf[256];
-  std::snprintf(buf, sizeof buf, f, a, b, c);
-  return buf;
 }
 
 // Normalized cross-correlation of r(t) with x(t - k), k = 0..max_lag.
@@ -225,7 +214,7 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     std::vector<char> in(n);
     for (std::size_t k = 0; k < n; ++k) in[k] = bin[k] == b;
     const double lo = *umin_it + b * bw, hi = lo + bw;
-    add_region("op-level", fmt("OP %.1f-%.1f", lo, hi), lo, hi, in);
+    add_region("op-level", strprintf("OP %.1f-%.1f", lo, hi), lo, hi, in);
   }
   for (int d : {1, -1, 0}) {
     std::vector<char> in(n);
@@ -247,9 +236,9 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     for (std::size_t k = 0; k < n; ++k)
       in[k] = since[k] >= edges[b] && since[k] < edges[b + 1] && since[k] < n;
     const std::string label =
-        b < 3 ? fmt("%.0f-%.0f samples after a reversal", static_cast<double>(edges[b]),
-                    static_cast<double>(edges[b + 1]))
-              : fmt(">= %.0f samples after a reversal", static_cast<double>(edges[b]));
+        b < 3 ? strprintf("%.0f-%.0f samples after a reversal", static_cast<double>(edges[b]),
+                          static_cast<double>(edges[b + 1]))
+              : strprintf(">= %.0f samples after a reversal", static_cast<double>(edges[b]));
     add_region("since-reversal", label, static_cast<double>(edges[b]),
                static_cast<double>(edges[b + 1]), in);
   }
@@ -279,22 +268,24 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
         in += r[k] * r[k];
         nin += 1;
       }
-    jump = median(jumps);
+    jump = jumps.empty() ? 0.0 : median(jumps);
     const double ratio = (nin > 0 && sse > 0) ? (in / nin) / (sse / static_cast<double>(n)) : 0.0;
     const double enough = rev.size() >= 4 ? 1.0 : 0.0;
     push("reversal-locked", {"stiction", "deadband"}, ratio, enough * (ratio - 1.2) / 1.5,
          rev.size() < 4
-             ? fmt("only %.0f OP reversals: too few to test", static_cast<double>(rev.size()))
-             : fmt("squared error in the %.0f samples after each of %.0f OP reversals is %.2f x "
+             ? strprintf("only %.0f OP reversals: too few to test", static_cast<double>(rev.size()))
+             : strprintf(
+                   "squared error in the %.0f samples after each of %.0f OP reversals is %.2f x "
                    "the average",
                    static_cast<double>(win), static_cast<double>(rev.size()), ratio) +
-                   fmt("; largest residual step there: %.1f x noise (slip-jump if large)", jump));
+                   strprintf("; largest residual step there: %.1f x noise (slip-jump if large)",
+                             jump));
   }
   // 2. Error that depends on the OP level (characteristic, preisach, saturation).
   const double eta_level = eta_squared(r, bin, bins);
   push("op-level", {"characteristic", "preisach", "saturation"}, eta_level,
        (eta_level - 0.05) / 0.3,
-       fmt("OP level explains %.0f %% of the residual variance", 100 * eta_level));
+       strprintf("OP level explains %.0f %% of the residual variance", 100 * eta_level));
   // 3. Error that depends on the direction of travel at the same level (preisach, stiction).
   {
     std::vector<int> g(n);
@@ -305,7 +296,8 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     const double level_only = eta_squared(r, g1, bins);
     const double gain = std::max(0.0, both - level_only);
     push("direction", {"preisach", "stiction"}, gain, (gain - 0.03) / 0.2,
-         fmt("direction of travel adds %.0f %% of residual variance explained beyond the OP level",
+         strprintf(
+             "direction of travel adds %.0f %% of residual variance explained beyond the OP level",
              100 * gain));
   }
   // 4. One-sided error while OP is at an end of its range (saturation).
@@ -328,13 +320,13 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
       if (v > best) {
         best = v;
         mean_best = m;
-        where = side < 0 ? fmt("OP <= %.1f", lo_q) : fmt("OP >= %.1f", hi_q);
+        where = side < 0 ? strprintf("OP <= %.1f", lo_q) : strprintf("OP >= %.1f", hi_q);
       }
     }
     push("one-sided-at-limit", {"saturation"}, best, (best - 0.4) / 0.8,
          where.empty() ? std::string("no samples at the ends of the OP range")
-                       : "mean residual " + fmt("%.3g", mean_best) + " while " + where +
-                             fmt(" (%.2f x the residual RMS)", best));
+                       : "mean residual " + strprintf("%.3g", mean_best) + " while " + where +
+                             strprintf(" (%.2f x the residual RMS)", best));
   }
   // 5-6. Residual correlated with past OP moves: just beyond the model's delay (actuator-lag,
   // order), or further (delay, order).
@@ -353,12 +345,14 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
         if (v > long_max) long_max = v, long_lag = k;
       }
     }
-    push("input-correlation-short", {"actuator-lag", "order"}, short_max, (short_max - 2) / 4,
-         fmt("residual vs OP moves: peak %.1f x the 95 %% band at lag %.0f (model delay %.0f)",
-             short_max, static_cast<double>(short_lag), static_cast<double>(d0)));
+    push(
+        "input-correlation-short", {"actuator-lag", "order"}, short_max, (short_max - 2) / 4,
+        strprintf("residual vs OP moves: peak %.1f x the 95 %% band at lag %.0f (model delay %.0f)",
+                  short_max, static_cast<double>(short_lag), static_cast<double>(d0)));
     push(
         "input-correlation-long", {"delay", "order"}, long_max, (long_max - 2) / 4,
-        fmt("residual vs OP moves beyond the model's reach: peak %.1f x the 95 %% band at lag %.0f",
+        strprintf(
+            "residual vs OP moves beyond the model's reach: peak %.1f x the 95 %% band at lag %.0f",
             long_max, static_cast<double>(long_lag)));
   }
   // 7. Low-frequency residual not explained by OP (disturbance, integrator).
@@ -384,7 +378,8 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     const double with_op = std::abs(ccf(lp, lpu, 0)[0]);
     push("low-frequency", {"disturbance", "integrator"}, frac,
          (frac - 0.3) / 0.5 * (1.0 - 0.5 * with_op),
-         fmt("%.0f %% of the residual variance is slower than %.0f samples; its correlation with "
+         strprintf(
+             "%.0f %% of the residual variance is slower than %.0f samples; its correlation with "
              "slow OP is %.2f",
              100 * frac, static_cast<double>(w), with_op));
     // Ramp-like drift of the simulated output (integrator).
@@ -406,7 +401,7 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     }
     const double r2 = vr > 0 ? std::max(0.0, 1.0 - sres / vr) : 0.0;
     push("drift", {"integrator", "disturbance"}, r2, (r2 - 0.2) / 0.5,
-         fmt("a straight line in time explains %.0f %% of the residual variance", 100 * r2));
+         strprintf("a straight line in time explains %.0f %% of the residual variance", 100 * r2));
   }
   // 8. Whiteness (Ljung-Box) of the residual.
   {
@@ -421,7 +416,7 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     const double crit =
         hh * std::pow(1 - 2 / (9 * hh) + 1.645 * std::sqrt(2 / (9 * hh)), 3);  // chi2 95 %
     push("whiteness", {"disturbance"}, q / crit, (q / crit - 1) / 20,
-         fmt("Ljung-Box Q = %.0f over %.0f lags (white below %.0f)", q, hh, crit));
+         strprintf("Ljung-Box Q = %.0f over %.0f lags (white below %.0f)", q, hh, crit));
   }
   return a;
 }

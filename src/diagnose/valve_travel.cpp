@@ -10,22 +10,10 @@
 #include <cstdio>
 
 #include "valvediag/hammerstein.hpp"
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 namespace {
-
-std::string fmt(const char* f, double a = 0, double b = 0, double c = 0, double d = 0,
-                double e = 0) {
-  char buf[400];
-  std::snprintf(buf, sizeof buf, f, a, b, c, d, e);
-  return buf;
-}
-
-double quantile(std::vector<double> v, double p) {
-  const auto k = static_cast<std::size_t>(std::llround(p * static_cast<double>(v.size() - 1)));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
 
 // White-noise sigma from the sample-to-sample changes (a moving valve adds to it: an upper bound).
 // Not limit_cycle.hpp's noise_sigma (second differences): this test's thresholds were measured with
@@ -304,21 +292,21 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
     return v;
   }
   if (mv.size() != op.size()) {
-    v.summary = fmt("MV has %.0f samples and OP %.0f: they are not one record",
-                    static_cast<double>(mv.size()), static_cast<double>(op.size()));
+    v.summary = strprintf("MV has %.0f samples and OP %.0f: they are not one record",
+                          static_cast<double>(mv.size()), static_cast<double>(op.size()));
     return v;
   }
   for (std::size_t k = 0; k < mv.size(); ++k)
     if (!std::isfinite(mv[k]) || !std::isfinite(op[k])) {
-      v.summary =
-          fmt("MV or OP is not a number at sample %.0f: the valve-travel test needs an "
-              "unbroken record",
-              static_cast<double>(k));
+      v.summary = strprintf(
+          "MV or OP is not a number at sample %.0f: the valve-travel test needs an "
+          "unbroken record",
+          static_cast<double>(k));
       return v;
     }
   if (op.size() < opt.min_samples || !(Ts > 0.0)) {
-    v.summary = fmt("only %.0f samples of MV; at least %.0f are needed",
-                    static_cast<double>(op.size()), static_cast<double>(opt.min_samples));
+    v.summary = strprintf("only %.0f samples of MV; at least %.0f are needed",
+                          static_cast<double>(op.size()), static_cast<double>(opt.min_samples));
     return v;
   }
   const double width = std::max(opt.op_hi - opt.op_lo, 1e-12);
@@ -335,11 +323,11 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
       op_range >= std::max(opt.stuck_op_noise * v.mv_noise, 0.02 * width)) {
     v.decided = true;
     v.verdict = "stiction";
-    v.summary =
-        fmt("the valve position stays within %.2f %% of travel while OP sweeps %.1f %%: "
-            "the valve is stuck (or its position transmitter is dead; check it before "
-            "the valve)",
-            mv_span * to_pct, op_range * to_pct);
+    v.summary = strprintf(
+        "the valve position stays within %.2f %% of travel while OP sweeps %.1f %%: "
+        "the valve is stuck (or its position transmitter is dead; check it before "
+        "the valve)",
+        mv_span * to_pct, op_range * to_pct);
     return v;
   }
   if (op_span <= 0.0) {
@@ -466,7 +454,7 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   // with few reversals, or a fit to noise): the closed-loop models decide. "Follows OP" needs
   // friction to fail on both parts, or a band under the resolution.
   if (explains_est != explains_val && above_resolution) {
-    v.summary = fmt(
+    v.summary = strprintf(
         "the valve-travel test is inconclusive: friction (He's fs %.2f, fd %.2f) explains "
         "%.0f / %.0f %% of the error a valve that follows OP leaves (estimation / held out), "
         "above %.0f %% on one part only; the process models decide",
@@ -482,11 +470,13 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
     v.lag_s = friction.tau;
     v.gain = er.gain;
     v.summary =
-        fmt("the measured valve position has friction: after a reversal OP travels %.2f %% of "
+        strprintf(
+            "the measured valve position has friction: after a reversal OP travels %.2f %% of "
             "travel before the valve moves, then it jumps %.2f %% (He's fs %.2f, fd %.2f); it "
             "explains ",
             band * to_pct, v.jump_percent, v.fs_percent, v.fd_percent) +
-        fmt("%.0f / %.0f %% of the error a valve that follows OP leaves (estimation / held out)",
+        strprintf(
+            "%.0f / %.0f %% of the error a valve that follows OP leaves (estimation / held out)",
             100 * share_est, 100 * share_val);
     if (backlash) v.summary += " (no jump: backlash)";
     return v;
@@ -494,11 +484,14 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   v.verdict = "no-valve-problem";
   std::string why;
   if (!explains)
-    why = fmt("friction explains only %.0f / %.0f %% of the error left (estimation / held out)",
-              100 * share_est, 100 * share_val);
+    why =
+        strprintf("friction explains only %.0f / %.0f %% of the error left (estimation / held out)",
+                  100 * share_est, 100 * share_val);
   else
-    why = fmt("its band, %.2f %% of travel, is under %.2f %%", band * to_pct, opt.min_band_percent);
-  v.summary = fmt("the measured valve position follows OP (%.1f / %.1f %% fitness, lag %.1f s, "
+    why = strprintf("its band, %.2f %% of travel, is under %.2f %%", band * to_pct,
+                    opt.min_band_percent);
+  v.summary = strprintf(
+                  "the measured valve position follows OP (%.1f / %.1f %% fitness, lag %.1f s, "
                   "gain %.3f): ",
                   v.follow_fitness_percent, v.follow_validation_fitness_percent, v.lag_s, v.gain) +
               why;

@@ -9,6 +9,7 @@
 
 #include "valvediag/identifiability.hpp"
 #include "valvediag/model_fit.hpp"
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 
@@ -55,19 +56,6 @@ std::string model_verdict(const Diagnosis& d) {
 
 namespace {
 
-std::string fmt(const char* f, double a = 0, double b = 0, double c = 0, double d = 0) {
-  char buf[320];
-  std::snprintf(buf, sizeof buf, f, a, b, c, d);
-  return buf;
-}
-
-double quantile(std::vector<double> v, double p) {
-  if (v.empty()) return std::nan("");
-  const auto k = static_cast<std::size_t>(std::llround(p * static_cast<double>(v.size() - 1)));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
-
 double param(const std::vector<FittedEffect>& effects, const char* effect, const char* name) {
   for (const auto& e : effects)
     if (e.name == effect)
@@ -93,13 +81,13 @@ std::string without_hysteresis(const VerdictFigures& f, std::string* reason,
       (f.finding == "saturation" || f.finding == "characteristic" || f.finding == "actuator-lag")) {
     if (reason)
       *reason = why + "; the diagnosis supports `" + f.finding + "` (" +
-                fmt("%+.1f", f.finding_gain) + " points on estimation and held-out data)";
+                strprintf("%+.1f", f.finding_gain) + " points on estimation and held-out data)";
     return "other-nonlinearity";
   }
   if (reason) {
     *reason = why;
     if (f.finding_supported && is_hysteresis(f.finding))
-      *reason += "; the diagnosis's `" + f.finding + "` (" + fmt("%+.1f", f.finding_gain) +
+      *reason += "; the diagnosis's `" + f.finding + "` (" + strprintf("%+.1f", f.finding_gain) +
                  " points) is not confirmed on the whole record";
   }
   return "no-valve-problem";
@@ -116,27 +104,28 @@ std::string decide_verdict(const VerdictFigures& f, const VerdictOptions& opt,
         f, reason,
         "no valve model with memory explains the record clearly better than the linear one (" +
             (f.hysteresis_model.empty() ? std::string("none") : f.hysteresis_model) +
-            fmt(": %+.1f points, %.0f %% of the error linear leaves)", f.hysteresis_gain,
-                100 * f.relative_gain));
+            strprintf(": %+.1f points, %.0f %% of the error linear leaves)", f.hysteresis_gain,
+                      100 * f.relative_gain));
   if (std::isnan(f.hysteresis_validation_gain) == false &&
       !(f.hysteresis_validation_gain >= opt.min_validation_gain))
     return without_hysteresis(
         f, reason,
         "a valve model with memory (" + f.hysteresis_model +
-            fmt(") fits the whole record better (%+.1f points) but loses on held-out data "
-                "(%+.1f points): not confirmed",
-                f.hysteresis_gain, f.hysteresis_validation_gain));
+            strprintf(") fits the whole record better (%+.1f points) but loses on held-out data "
+                      "(%+.1f points): not confirmed",
+                      f.hysteresis_gain, f.hysteresis_validation_gain));
   if (!(f.band >= opt.min_band_noise * f.op_noise))
     return without_hysteresis(
         f, reason,
-        fmt("a model with memory fits better (%+.1f points) but the stiction band it implies, "
+        strprintf(
+            "a model with memory fits better (%+.1f points) but the stiction band it implies, "
             "%.2f %% of travel, lies within the OP noise (%.3f %%)",
             f.hysteresis_gain, f.band, f.op_noise));
   const double best_hyst = std::max(f.stiction_fitness, f.preisach_fitness);
   if (f.jump < opt.deadband_jump_fraction * f.band &&
       f.deadband_fitness >= best_hyst - opt.deadband_fit_points) {
     if (reason)
-      *reason = fmt(
+      *reason = strprintf(
           "the valve lags OP by a band of %.2f %% of travel after each reversal, without a slip "
           "jump (deadband fits within %.1f points of the best model with memory, %+.1f points "
           "over linear)",
@@ -145,11 +134,12 @@ std::string decide_verdict(const VerdictFigures& f, const VerdictOptions& opt,
   }
   if (reason)
     *reason = "a valve with memory (" + f.hysteresis_model +
-              fmt(") explains %.0f %% of the error the linear model leaves (%+.1f points); "
+              strprintf(
+                  ") explains %.0f %% of the error the linear model leaves (%+.1f points); "
                   "He's fit: OP travels %.2f %% of travel after a reversal before the valve "
                   "moves, ",
                   100 * f.relative_gain, f.hysteresis_gain, f.band) +
-              fmt("then it jumps %.2f %% (fs %.2f, fd %.2f)", f.jump, f.fs, f.fd);
+              strprintf("then it jumps %.2f %% (fs %.2f, fd %.2f)", f.jump, f.fs, f.fd);
   return "stiction";
 }
 
@@ -167,11 +157,11 @@ LoopVerdict loop_verdict(const std::vector<double>& u, const std::vector<double>
   if (u.size() != y.size()) return not_enough(v, "OP and PV differ in length");
   if (!(Ts > 0) || !(span > 0)) return not_enough(v, "no valid sample period or OP span");
   if (N < opt.min_samples)
-    return not_enough(v, fmt("%.0f samples; at least %.0f are needed", static_cast<double>(N),
-                             static_cast<double>(opt.min_samples)));
+    return not_enough(v, strprintf("%.0f samples; at least %.0f are needed", static_cast<double>(N),
+                                   static_cast<double>(opt.min_samples)));
   for (std::size_t t = 0; t < N; ++t)
     if (!std::isfinite(u[t]) || !std::isfinite(y[t]))
-      return not_enough(v, fmt("a non-finite sample at index %.0f", static_cast<double>(t)));
+      return not_enough(v, strprintf("a non-finite sample at index %.0f", static_cast<double>(t)));
   const auto [ylo, yhi] = std::minmax_element(y.begin(), y.end());
   if (!(*yhi > *ylo)) return not_enough(v, "PV is constant: a dead measurement");
   const auto [ulo, uhi] = std::minmax_element(u.begin(), u.end());
@@ -187,12 +177,13 @@ LoopVerdict loop_verdict(const std::vector<double>& u, const std::vector<double>
   f.op_noise = quantile(du, 0.5) / 0.954 * 100.0 / span;
   f.op_range = (quantile(u, 0.95) - quantile(u, 0.05)) * 100.0 / span;
   if (f.saturated >= opt.saturated_fraction)
-    return not_enough(v, fmt("OP is at an end of its span in %.0f %% of the samples (saturated)",
-                             100 * f.saturated));
+    return not_enough(v,
+                      strprintf("OP is at an end of its span in %.0f %% of the samples (saturated)",
+                                100 * f.saturated));
   if (!(f.op_range > opt.min_op_range_noise * f.op_noise))
-    return not_enough(v, fmt("OP moves %.3f %% of travel (5-95 %%), no more than its noise "
-                             "(%.3f %%): the valve was not exercised",
-                             f.op_range, f.op_noise));
+    return not_enough(v, strprintf("OP moves %.3f %% of travel (5-95 %%), no more than its noise "
+                                   "(%.3f %%): the valve was not exercised",
+                                   f.op_range, f.op_noise));
   const Identifiability id = analyse_identifiability(PreisachGrid{*ulo, *uhi, 10}, u);
   f.op_reversals = id.reversals;
   if (id.kind == ExcitationKind::Insufficient || id.reversals < opt.min_reversals)

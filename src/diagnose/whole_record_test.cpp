@@ -6,15 +6,11 @@
 #include <limits>
 #include <stdexcept>
 
+#include "valvediag/text_stats.hpp"
+
 namespace valvediag {
 
 namespace {
-
-std::string fmt(const char* f, double a = 0, double b = 0, double c = 0) {
-  char buf[256];
-  std::snprintf(buf, sizeof buf, f, a, b, c);
-  return buf;
-}
 
 bool is_memory(const std::string& effect) {
   return effect == "stiction" || effect == "deadband" || effect == "preisach";
@@ -62,10 +58,11 @@ void guards(const std::vector<double>& u, const std::vector<double>& y, double T
     w.load_bic_margin = bic_margin(mem, k_mem, load, k_load, y.size());
     if (!(w.load_bic_margin > 0)) {
       w.preferred = "disturbance";
-      w.summary = head +
-                  fmt(", but a slow load fits it better (%.1f %% against %.1f %%, BIC ",
-                      w.load_fitness, w.memory_fitness) +
-                  fmt("%.0f lower even with its %.0f knots charged)", -w.load_bic_margin, k_load);
+      w.summary =
+          head +
+          strprintf(", but a slow load fits it better (%.1f %% against %.1f %%, BIC ",
+                    w.load_fitness, w.memory_fitness) +
+          strprintf("%.0f lower even with its %.0f knots charged)", -w.load_bic_margin, k_load);
       return;
     }
   }
@@ -95,20 +92,21 @@ void guards(const std::vector<double>& u, const std::vector<double>& y, double T
   if (!w.rival.empty() && !(w.rival_bic_margin > 0)) {
     w.preferred = w.rival;
     w.summary = head + ", but `" + w.rival + "` without memory fits it as well (" +
-                fmt("%.1f %% against %.1f %%, BIC %.0f lower", w.rival_fitness, w.memory_fitness,
-                    -w.rival_bic_margin) +
+                strprintf("%.1f %% against %.1f %%, BIC %.0f lower", w.rival_fitness,
+                          w.memory_fitness, -w.rival_bic_margin) +
                 ")";
     return;
   }
   w.confirmed = true;
-  w.summary = head + ", more than any memoryless effect" +
-              (w.rival.empty() ? std::string()
-                               : " (best: `" + w.rival + fmt("`, %+.1f)", w.rival_fitness - f0)) +
-              (!with_load ? std::string()
-               : std::isfinite(w.load_bic_margin)
-                   ? fmt(" and than a slow load once its knots are charged (BIC %.0f lower)",
-                         w.load_bic_margin)
-                   : std::string(" (a slow load has no stable fit)"));
+  w.summary =
+      head + ", more than any memoryless effect" +
+      (w.rival.empty() ? std::string()
+                       : " (best: `" + w.rival + strprintf("`, %+.1f)", w.rival_fitness - f0)) +
+      (!with_load ? std::string()
+       : std::isfinite(w.load_bic_margin)
+           ? strprintf(" and than a slow load once its knots are charged (BIC %.0f lower)",
+                       w.load_bic_margin)
+           : std::string(" (a slow load has no stable fit)"));
 }
 
 // Start-model and memory figures of w from their whole-record fits; the sentence's head.
@@ -124,8 +122,8 @@ std::string describe(const ModelFit& base, const ModelFit& mem, const ModelSpec&
   const double gain = w.memory_fitness - f0;
   w.relative_gain = gain / std::max(100.0 - f0, 1.0);
   return "on the whole record `" + w.memory_model + "` explains " +
-         fmt("%.0f %% of the error `", 100 * w.relative_gain) + to_string(start) +
-         fmt("` leaves (%+.1f points)", gain);
+         strprintf("%.0f %% of the error `", 100 * w.relative_gain) + to_string(start) +
+         strprintf("` leaves (%+.1f points)", gain);
 }
 
 }  // namespace
@@ -158,8 +156,8 @@ WholeRecordTest whole_record_test(const std::vector<double>& u, const std::vecto
   const double f0 = std::isfinite(w.start_fitness) ? std::max(w.start_fitness, 0.0) : 0.0;
   if (!(w.memory_fitness - f0 >= opt.min_gain_percent &&
         w.relative_gain >= opt.min_relative_gain)) {
-    w.summary = head + fmt(": under the %.0f %% a valve with memory must explain",
-                           100 * opt.min_relative_gain);
+    w.summary = head + strprintf(": under the %.0f %% a valve with memory must explain",
+                                 100 * opt.min_relative_gain);
     return w;
   }
   guards(u, y, Ts, start, *mem, fit, head, w);

@@ -8,6 +8,8 @@
 #include <mutex>
 #include <thread>
 
+#include "valvediag/text_stats.hpp"
+
 namespace valvediag {
 
 namespace {
@@ -19,14 +21,6 @@ double since(Clock::time_point a, Clock::time_point b) {
 
 double wall_now() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  const auto k = static_cast<std::size_t>(std::min<double>(
-      static_cast<double>(v.size() - 1), std::floor(p * static_cast<double>(v.size() - 1) + 0.5)));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
 }
 
 struct PolledLoop {
@@ -186,8 +180,8 @@ struct Recorder::Impl {
     s.committed = committed;
     s.bad_rows = bad_rows;
     s.missed = missed;
-    s.lateness_p50_s = percentile(lateness, 0.5);
-    s.lateness_p99_s = percentile(lateness, 0.99);
+    s.lateness_p50_s = lateness.empty() ? 0.0 : quantile(lateness, 0.5);  // none yet: 0
+    s.lateness_p99_s = lateness.empty() ? 0.0 : quantile(lateness, 0.99);
     s.lateness_max_s = lateness_max;
     s.loops = counts;
     s.last_error = last_error;
