@@ -49,6 +49,9 @@ struct DiagnoseOptions {
   // verdict rests on the held-out trial fits and the limit cycle alone.
   bool whole_record = true;
   WholeRecordOptions whole_record_options;
+  // The valve-travel test, run when the valve position is given: its OP span (op_lo, op_hi)
+  // turns friction into % of travel, so set it to the valve's OP range when OP is not 0..100.
+  ValveTravelOptions valve_travel;
 };
 
 struct DiagnosisStep {
@@ -68,8 +71,8 @@ struct Diagnosis {
   // cycle found a valve with memory: a valve that slips once or twice in the record leaves the
   // held-out part too few slips to confirm its band.
   WholeRecordTest whole_record;
-  // The valve-travel test (valve_travel.hpp), filled in by the caller when MV is recorded: the
-  // measured valve position outweighs what the closed-loop models suggest about friction.
+  // The valve-travel test (valve_travel.hpp), run by the overloads that take the recorded valve
+  // position: the measured position outweighs what the closed-loop models suggest about friction.
   ValveTravel valve_travel;
   const DiagnosisStep& last() const { return steps.back(); }
 };
@@ -82,5 +85,15 @@ Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, d
 // meaningful margin, then stops with a statement of what is left.
 Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                         const ModelSpec& start, const DiagnoseOptions& opt = {});
+
+// The same for a loop whose valve position `mv` (same length as u) may be recorded: when mv is
+// not empty, the valve-travel test reads friction from u -> mv with opt.valve_travel. One place
+// for it, so that every caller passes the valve's OP range the same way.
+Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y,
+                   const std::vector<double>& mv, double Ts, const ModelSpec& model,
+                   const DiagnoseOptions& opt = {});
+Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y,
+                        const std::vector<double>& mv, double Ts, const ModelSpec& start,
+                        const DiagnoseOptions& opt = {});
 
 }  // namespace valvediag

@@ -8,7 +8,6 @@
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
 #include "valvediag/loop_assessment.hpp"
-#include "valvediag/valve_travel.hpp"
 
 namespace valvediag::cli {
 
@@ -33,10 +32,11 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     bool autoclimb = false, no_history = false;
     double min_gain = 2.0;
     std::vector<std::string> candidates;
-    std::string json;
+    std::string json, op_range;
   };
   auto a = std::make_shared<Args>();
   add_data_options(cmd, a->data);
+  add_op_range_option(cmd, a->op_range);
   cmd->add_option("--model", a->model,
                   "the model to diagnose, e.g. linear, stiction, stiction+saturation")
       ->capture_default_str();
@@ -56,22 +56,25 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     if (!(a->validate > 0.05 && a->validate < 0.9))
       throw UsageError("--validate must lie in (0.05, 0.9)");
     const ModelSpec spec = parse_model_spec(a->model);
+    const OpRange range = parse_op_range(a->op_range);
     std::vector<std::string> notes;
     const LoopData d = load_data(a->data, notes);
     check_identifiable_data(d, 200, "a diagnosis");
+    if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     DiagnoseOptions o;
+    o.valve_travel.op_lo = range.lo;
+    o.valve_travel.op_hi = range.hi;
     o.validation_fraction = a->validate;
     o.min_gain_percent = a->min_gain;
     o.candidates = a->candidates;
     for (const auto& c : o.candidates) (void)parse_effect(c);  // unknown names are user errors
     const double Ts = d.sample_period();
-    Diagnosis r =
-        a->autoclimb ? diagnose_auto(d.op, d.pv, Ts, spec, o) : diagnose(d.op, d.pv, Ts, spec, o);
-    if (d.has_mv()) r.valve_travel = check_valve_travel(d.op, d.mv, Ts);
+    Diagnosis r = a->autoclimb ? diagnose_auto(d.op, d.pv, d.mv, Ts, spec, o)
+                               : diagnose(d.op, d.pv, d.mv, Ts, spec, o);
     std::cout << format_diagnosis(r, d.t);
     // The stiction size the sweep reports, for one loop without a site config.
-    const FrictionSize fr = friction_size(r, d.op, d.pv);
+    const FrictionSize fr = friction_size(r, d.op, d.pv, range);
     if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent))
       std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%\n",
                   fr.band_percent, fr.jump_percent);

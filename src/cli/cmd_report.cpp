@@ -12,7 +12,6 @@
 #include "valvediag/data_checks.hpp"
 #include "valvediag/html_report.hpp"
 #include "valvediag/model_history.hpp"
-#include "valvediag/valve_travel.hpp"
 #include "valvediag/verdict.hpp"
 
 namespace valvediag::cli {
@@ -86,9 +85,11 @@ void add_report(CLI::App& app, int& exit_code) {
     double validate = 0.3;
     double timeout = 30.0;
     bool no_diagnose = false, no_history = false, no_plots = false;
+    std::string op_range;
   };
   auto a = std::make_shared<Args>();
   add_data_options(cmd, a->data);
+  add_op_range_option(cmd, a->op_range);
   const char* g = "Report";
   cmd->add_option("--model", a->model,
                   "the model to fit and show, e.g. preisach, stiction+saturation (default: the "
@@ -118,6 +119,7 @@ void add_report(CLI::App& app, int& exit_code) {
       throw UsageError("--validate must lie in (0.05, 0.9)");
     std::optional<ModelSpec> spec;
     if (!a->model.empty()) spec = parse_model_spec(a->model);  // bad names: exit status 2
+    const OpRange range = parse_op_range(a->op_range);
     const std::string name = data_name(a->data);
     const std::string out = a->out.empty() ? name + ".report.html" : a->out;
     ReportOptions ro;
@@ -137,6 +139,7 @@ void add_report(CLI::App& app, int& exit_code) {
     std::vector<std::string> notes;
     const LoopData d = load_data(a->data, notes);
     check_identifiable_data(d, 200, "a report");
+    if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     const std::string history = history_path_for(name);
     auto ladder = load_history(history);
@@ -158,9 +161,10 @@ void add_report(CLI::App& app, int& exit_code) {
     if (!a->no_diagnose) {
       DiagnoseOptions o;
       o.validation_fraction = a->validate;
+      o.valve_travel.op_lo = range.lo;
+      o.valve_travel.op_hi = range.hi;
       try {
-        diag = diagnose(d.op, d.pv, Ts, *spec, o);
-        if (d.has_mv()) diag.valve_travel = check_valve_travel(d.op, d.mv, Ts);
+        diag = diagnose(d.op, d.pv, d.mv, Ts, *spec, o);
         fit = diag.steps.front().fit;
         where = diag.steps.front().residual;
         diagnosed = true;

@@ -63,7 +63,8 @@ struct LoopJob {
 
 struct SweepArgs {
   std::string config, db, loops, window = "4h", record, shard, json, csv, html, loop_timeout = "5m";
-  std::string reports;  // a folder for each loop's HTML report
+  std::string reports;   // a folder for each loop's HTML report
+  std::string op_range;  // data files: every file's OP span (a site gives each loop's)
   std::vector<std::string> files;
   DataOptions layout;  // CSV layout for data files
   int jobs = 0;
@@ -243,12 +244,19 @@ void add_sweep(CLI::App& app, int& exit_code) {
                   "write each loop's HTML report into this folder (linked from --html)");
   cmd->add_flag("--quiet", a->quiet, "no line per finished loop");
   add_layout_options(cmd, a->layout);
+  add_op_range_option(cmd, a->op_range);
   cmd->callback([a, &exit_code] {
     const bool site_mode = !a->config.empty();
     if (site_mode == !a->files.empty())
       throw UsageError("give --config site.toml --db site.sqlite, or data files (one of them)");
     if (site_mode && a->db.empty()) throw UsageError("--config needs --db site.sqlite");
     if (!site_mode && !a->record.empty()) throw UsageError("--record goes with --config");
+    if (site_mode && !a->op_range.empty())
+      throw UsageError(
+          "--op-range goes with data files; a site gives each loop's OP range as "
+          "op_range = [min, max] in " +
+          a->config);
+    const OpRange file_range = parse_op_range(a->op_range);
     const double window_s = duration_option("--window", a->window);
     const double timeout_s = duration_option("--loop-timeout", a->loop_timeout);
     if (a->jobs < 0) throw UsageError("--jobs must be 0 (one per core) or more");
@@ -283,7 +291,7 @@ void add_sweep(CLI::App& app, int& exit_code) {
         for (int k = 2; seen.count(name); ++k)
           name = fs::path(f).stem().string() + "#" + std::to_string(k);
         seen.insert(name);
-        jobs.push_back({name, f, OpRange{}});
+        jobs.push_back({name, f, file_range});
       }
     }
     std::sort(jobs.begin(), jobs.end(),

@@ -1,5 +1,9 @@
 #include "data_options.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
 #include "commands.hpp"
 #include "isolated_mat_reader.hpp"
 #include "valvediag/mat_reader.hpp"
@@ -60,6 +64,46 @@ void add_layout_options(CLI::App* cmd, DataOptions& d) {
          "sample period in s (with --resample, without a time column, or for a .mat matrix or "
          "loop without Ts)")
       ->group(g);
+}
+
+void add_op_range_option(CLI::App* cmd, std::string& spec) {
+  cmd->add_option("--op-range", spec,
+                  "the valve's OP span LO:HI in OP units (default 0:100): stiction and valve "
+                  "travel are given in % of it")
+      ->group("Input");
+}
+
+OpRange parse_op_range(const std::string& spec) {
+  if (spec.empty()) return {};
+  const auto colon = spec.find(':');
+  OpRange r;
+  try {
+    if (colon == std::string::npos) throw std::invalid_argument("no colon");
+    std::size_t n1 = 0, n2 = 0;
+    const std::string lo = spec.substr(0, colon), hi = spec.substr(colon + 1);
+    r.lo = std::stod(lo, &n1);
+    r.hi = std::stod(hi, &n2);
+    if (n1 != lo.size() || n2 != hi.size()) throw std::invalid_argument("trailing text");
+  } catch (const std::exception&) {
+    throw UsageError("--op-range '" + spec +
+                     "': give the valve's OP span as LO:HI in OP units, e.g. 0:100 or 4:20");
+  }
+  if (!(std::isfinite(r.lo) && std::isfinite(r.hi) && r.lo < r.hi))
+    throw UsageError("--op-range '" + spec + "': LO must be below HI, both finite numbers");
+  return r;
+}
+
+std::string op_range_note(const LoopData& d, const OpRange& range, bool given) {
+  if (d.op.empty()) return "";
+  const auto [lo, hi] = std::minmax_element(d.op.begin(), d.op.end());
+  const double slack = 0.01 * (range.hi - range.lo);
+  if (*lo >= range.lo - slack && *hi <= range.hi + slack) return "";
+  char buf[320];
+  std::snprintf(buf, sizeof buf,
+                "OP spans %g .. %g, beyond the OP range %g:%g%s: stiction and valve travel in %% "
+                "of travel assume that range; give the valve's OP span with --op-range LO:HI",
+                *lo, *hi, range.lo, range.hi, given ? "" : " (the default, OP in %)");
+  return buf;
 }
 
 LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {

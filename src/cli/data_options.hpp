@@ -11,6 +11,7 @@
 
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/loop_data.hpp"
+#include "valvediag/loop_health.hpp"
 
 namespace valvediag::cli {
 
@@ -32,6 +33,14 @@ void add_layout_options(CLI::App* cmd, DataOptions& d);
 // go to `notes`. Wrong combinations (both or neither source, --loop without --db or a .mat file,
 // CSV layout options with a .mat file) are UsageErrors.
 LoopData load_data(DataOptions& d, std::vector<std::string>& notes);
+// --op-range LO:HI, the valve's OP span in OP units (group "Input"): friction and travel figures
+// are in % of it. Default 0:100 (OP in %).
+void add_op_range_option(CLI::App* cmd, std::string& spec);
+// Parses it ("" is 0:100); a UsageError names the option and the expected form.
+OpRange parse_op_range(const std::string& spec);
+// A note when OP leaves `range` by more than 1 % of it (the figures in % of travel would be
+// wrong), "" otherwise.
+std::string op_range_note(const LoopData& d, const OpRange& range, bool given);
 // What the data is called in messages and which name its model history hangs off:
 // the file, "site.sqlite.FIC101" for a recorded loop, "runs.mat.runs(2)" for a loop of a .mat
 // file named with --loop.

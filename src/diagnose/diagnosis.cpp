@@ -9,15 +9,11 @@
 #include <stdexcept>
 #include <utility>
 
+#include "valvediag/text_stats.hpp"
+
 namespace valvediag {
 
 namespace {
-
-std::string fmt(const char* f, double a = 0, double b = 0, double c = 0) {
-  char buf[256];
-  std::snprintf(buf, sizeof buf, f, a, b, c);
-  return buf;
-}
 
 double param(const std::vector<NamedValue>& p, const char* name, double fallback = std::nan("")) {
   for (const auto& v : p)
@@ -41,17 +37,17 @@ std::string explain(const std::string& effect, const ModelFit& trial,
     const double fs = param(p, "fs"), fd = param(p, "fd");
     const double S = param(p, "S"), J = param(p, "J"), d = param(p, "d");
     if (std::isfinite(S))
-      return fmt(
+      return strprintf(
           "valve sticks: OP must travel about %.1f %% after a reversal before it moves, then it "
           "jumps about %.1f %% (Kano's model): add `stiction`",
           S, std::isfinite(J) ? J : 0.0);
     if (std::isfinite(d))
-      return fmt(
+      return strprintf(
           "valve sticks: it stays put until OP is about %.1f %% away, then jumps to it "
           "(Stenman's model): add `stiction`",
           d);
     if (std::isfinite(fs))
-      return fmt(
+      return strprintf(
           "valve sticks: OP must travel about %.1f %% after a reversal before it moves, then it "
           "jumps about "
           "%.1f %%: add `stiction`",
@@ -60,7 +56,8 @@ std::string explain(const std::string& effect, const ModelFit& trial,
   }
   if (effect == "deadband") {
     const double d = param(p, "d");
-    return std::isfinite(d) ? fmt("play in the valve linkage: OP must travel about %.1f %% after a "
+    return std::isfinite(d) ? strprintf(
+                                  "play in the valve linkage: OP must travel about %.1f %% after a "
                                   "reversal before "
                                   "the valve follows, without a jump: add `deadband`",
                                   d)
@@ -72,7 +69,7 @@ std::string explain(const std::string& effect, const ModelFit& trial,
            "two-parameter stiction model is not enough: add `preisach`";
   if (effect == "saturation") {
     const double lo = param(p, "lower"), hi = param(p, "upper");
-    return fmt(
+    return strprintf(
         "the valve stops responding beyond its travel limits (about %.1f .. %.1f %% of OP): add "
         "`saturation`",
         lo, hi);
@@ -80,7 +77,8 @@ std::string explain(const std::string& effect, const ModelFit& trial,
   if (effect == "characteristic") {
     const double r = param(p, "R");
     return std::isfinite(r)
-               ? fmt("the process gain changes with the valve opening (installed characteristic, "
+               ? strprintf(
+                     "the process gain changes with the valve opening (installed characteristic, "
                      "rangeability about %.0f): add `characteristic`",
                      r)
                : "the process gain changes with the valve opening: add `characteristic`";
@@ -88,23 +86,24 @@ std::string explain(const std::string& effect, const ModelFit& trial,
   if (effect == "actuator-lag") {
     const double tau = param(p, "tau");
     return std::isfinite(tau)
-               ? fmt("the actuator follows OP with a lag of about %.1f s: check the positioner and "
+               ? strprintf(
+                     "the actuator follows OP with a lag of about %.1f s: check the positioner and "
                      "supply air; add `actuator-lag`",
                      tau)
                : "the actuator follows OP with a lag: add `actuator-lag`";
   }
   if (effect == "delay")
-    return fmt("the dead time is longer than modelled: about %.0f samples: add `delay`",
-               static_cast<double>(trial.structure.nk + 1));
+    return strprintf("the dead time is longer than modelled: about %.0f samples: add `delay`",
+                     static_cast<double>(trial.structure.nk + 1));
   if (effect == "order") {
     const double lag = param(p, "extra_lag", 0.0);
     if (lag > 0)
-      return fmt(
+      return strprintf(
           "the process has more lags than modelled (an extra lag of about %.0f s, na = %.0f, "
           "nb = %.0f): add `order` (or check for a slow actuator: the data cannot tell "
           "which)",
           lag, static_cast<double>(trial.structure.na), static_cast<double>(trial.structure.nb));
-    return fmt(
+    return strprintf(
         "the process has more lags than modelled (na = %.0f, nb = %.0f fit better): add `order`",
         static_cast<double>(trial.structure.na), static_cast<double>(trial.structure.nb));
   }
@@ -356,15 +355,15 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
 std::string conclusion_of(const DiagnosisStep& s, const std::vector<double>& t_axis, double Ts,
                           const std::string& why) {
   const auto& r = s.residual;
-  std::string c = why + " What is left: residual RMS " + fmt("%.3g", r.rms) +
-                  " against a white-noise level of " + fmt("%.3g", r.noise_level);
-  if (r.noise_level > 0) c += fmt(" (%.1f x)", r.rms / r.noise_level);
+  std::string c = why + " What is left: residual RMS " + strprintf("%.3g", r.rms) +
+                  " against a white-noise level of " + strprintf("%.3g", r.noise_level);
+  if (r.noise_level > 0) c += strprintf(" (%.1f x)", r.rms / r.noise_level);
   if (!r.intervals.empty()) {
     const auto& iv = r.intervals.front();
     const double t0 = t_axis.empty() ? iv.begin * Ts : t_axis[iv.begin];
     const double t1 = t_axis.empty() ? (iv.end - 1) * Ts : t_axis[iv.end - 1];
-    c += fmt("; the largest unexplained interval is t %.0f .. %.0f s", t0, t1) +
-         fmt(" (%.0f %% of the remaining error)", 100 * iv.share);
+    c += strprintf("; the largest unexplained interval is t %.0f .. %.0f s", t0, t1) +
+         strprintf(" (%.0f %% of the remaining error)", 100 * iv.share);
   }
   return c + ".";
 }
@@ -463,7 +462,7 @@ std::optional<std::pair<DiagnosisStep, std::string>> load_with_memory(const std:
   std::string why = "`disturbance` and `" + mem.effect +
                     "` were added together: neither alone improves both parts of the record, "
                     "together " +
-                    fmt("%+.1f points on estimation and %+.1f held out.", est, val);
+                    strprintf("%+.1f points on estimation and %+.1f held out.", est, val);
   return std::make_pair(std::move(with_load), std::move(why));
 }
 
@@ -497,7 +496,7 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
     d.steps.push_back(evaluate(u, y, Ts, model, opt));
     const auto& f = d.last().findings;
     if (k >= opt.max_steps) {
-      why = fmt("Stopped after %.0f added effects.", static_cast<double>(k));
+      why = strprintf("Stopped after %.0f added effects.", static_cast<double>(k));
       break;
     }
     if (f.empty()) {
@@ -517,8 +516,8 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
         }
       }
       why = "No further effect improves both estimation and validation fitness by " +
-            fmt("%.0f", opt.min_gain_percent) + " points or more (best candidate: `" + best.effect +
-            "`, " + fmt("%+.1f", gain) + ").";
+            strprintf("%.0f", opt.min_gain_percent) + " points or more (best candidate: `" +
+            best.effect + "`, " + strprintf("%+.1f", gain) + ").";
       break;
     }
     model = best.trial_spec;
@@ -528,6 +527,22 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
   d.conclusion = with_whole_record(
       with_limit_cycle(conclusion_of(d.last(), {}, Ts, why), d.limit_cycle), d.whole_record);
   if (!joint.empty()) d.conclusion = joint + " " + d.conclusion;
+  return d;
+}
+
+Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y,
+                   const std::vector<double>& mv, double Ts, const ModelSpec& model,
+                   const DiagnoseOptions& opt) {
+  Diagnosis d = diagnose(u, y, Ts, model, opt);
+  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, opt.valve_travel);
+  return d;
+}
+
+Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y,
+                        const std::vector<double>& mv, double Ts, const ModelSpec& start,
+                        const DiagnoseOptions& opt) {
+  Diagnosis d = diagnose_auto(u, y, Ts, start, opt);
+  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, opt.valve_travel);
   return d;
 }
 

@@ -128,17 +128,17 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
     return finish();
   }
   Diagnosis dg;
+  DiagnoseOptions dopt = opt.diagnose;
+  dopt.valve_travel.op_lo = opt.range.lo;
+  dopt.valve_travel.op_hi = opt.range.hi;
   try {
-    dg = diagnose_auto(d.op, d.pv, d.sample_period(), ModelSpec{}, opt.diagnose);
+    dg = diagnose_auto(d.op, d.pv, d.mv, d.sample_period(), ModelSpec{}, dopt);
   } catch (const std::invalid_argument& e) {
     // The usability checks passed, so this is not the data's fault: say so, do not guess.
     a.verdict = "error";
     a.error = std::string("the diagnosis failed: ") + e.what();
     return finish();
   }
-  if (d.has_mv())
-    dg.valve_travel = check_valve_travel(d.op, d.mv, d.sample_period(),
-                                         {.op_lo = opt.range.lo, .op_hi = opt.range.hi});
   const ModelFit& best = dg.last().fit;
   a.verdict = verdict(dg);
   a.valve_travel = dg.valve_travel;

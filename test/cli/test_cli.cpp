@@ -268,6 +268,29 @@ TEST_CASE("diagnose reads friction from a recorded valve position") {
   CHECK(l["valve_travel"]["fs_percent"].get<double>() == doctest::Approx(3.0).epsilon(0.1));
   CHECK(l["stiction_percent"].get<double>() == doctest::Approx(3.0).epsilon(0.1));
   CHECK(l["slip_jump_percent"].get<double>() == doctest::Approx(3.0).epsilon(0.1));
+  // OP in other units than % (a 0..200 span): --op-range turns the same friction into half the
+  // share of travel, in the travel test and in the reported size alike.
+  const std::string one =
+      "diagnose " + tmp("sten.csv") + " --model stiction:stenman --candidates delay --no-history ";
+  auto w = run(one + "--op-range 0:200 --json " + tmp("sten200.json"));
+  REQUIRE(w.status == 0);
+  CHECK(w.out.find("beyond the OP range") == std::string::npos);
+  std::ifstream m(tmp("sten200.json"));
+  const auto n = nlohmann::json::parse(m);
+  CHECK(n["valve_travel"]["fs_percent"].get<double>() == doctest::Approx(1.5).epsilon(0.1));
+  CHECK(n["stiction_percent"].get<double>() == doctest::Approx(1.5).epsilon(0.1));
+  // A range OP leaves is named in a note (the figures would be wrong); a malformed one is a
+  // user error.
+  auto narrow = run(one + "--op-range 0:40");
+  CHECK(narrow.status == 0);
+  CHECK(narrow.out.find("beyond the OP range 0:40: stiction and valve travel in % of travel "
+                        "assume that range; give the valve's OP span with --op-range LO:HI") !=
+        std::string::npos);
+  for (const char* bad : {"5", "9:3", "0:x", "nan:1"}) {
+    auto b = run(one + "--op-range " + bad);
+    CHECK_MESSAGE(b.status == 2, bad);
+    CHECK(b.out.find("--op-range") != std::string::npos);
+  }
 }
 
 TEST_CASE("a model history that cannot be written is a warning: the result stands") {

@@ -284,6 +284,10 @@ TEST_CASE("sweep: a loop over its time limit is stopped and reported; user error
   CHECK(run({"sweep"}).status == 2);
   CHECK(run({"sweep", longf, "--config", kSimSite}).status == 2);
   CHECK(run({"sweep", longf, "--shard", "2/2"}).status == 2);
+  CHECK(run({"sweep", "--config", kSimSite, "--db", (kTmp / "x.sqlite").string(), "--op-range",
+             "0:200"})
+            .status == 2);  // a site gives each loop's range
+  CHECK(run({"sweep", longf, "--op-range", "100:0"}).status == 2);
   CHECK(run({"sweep", longf, "--window", "soon"}).status == 2);
   CHECK(run({"trend", "--db", (kTmp / "none.sqlite").string()}).status == 2);
 }
