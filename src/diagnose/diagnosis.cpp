@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "valvediag/pairwise_ranking.hpp"
 #include "valvediag/text_stats.hpp"
 
 namespace valvediag {
@@ -298,27 +299,29 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     };
     return (memory(a) && b == "disturbance") || (memory(b) && a == "disturbance");
   };
-  std::stable_sort(step.findings.begin(), step.findings.end(),
-                   [margin, base_est, &size, &mutual](const Finding& a, const Finding& b) {
-                     const double hi = std::max(a.gain_percent, b.gain_percent);
-                     const double lo = std::min(a.gain_percent, b.gain_percent);
-                     const double left = std::max(100.0 - base_est - lo, 0.0);
-                     // Clearly more only when not less on either part of the record: the
-                     // smaller of the two gains hides a trial that loses far on the other.
-                     const Finding& more = a.gain_percent > b.gain_percent ? a : b;
-                     const Finding& less = a.gain_percent > b.gain_percent ? b : a;
-                     if (hi >= margin && hi - lo > 0.2 * left &&
-                         more.validation_gain_percent >= less.validation_gain_percent &&
-                         more.estimation_gain_percent >= less.estimation_gain_percent)
-                       return a.gain_percent > b.gain_percent;
-                     const double sa = size[a.effect], sb = size[b.effect];
-                     const bool occam = hi >= margin && !mutual(a.effect, b.effect);
-                     if (occam && (sa + 1) >= 3 * (sb + 1)) return false;
-                     if (occam && (sb + 1) >= 3 * (sa + 1)) return true;
-                     if (std::abs(a.score - b.score) > 0.02) return a.score > b.score;
-                     if (hi >= margin && sa != sb) return sa < sb;
-                     return a.gain_percent > b.gain_percent;
-                   });
+  const auto ranks_above = [margin, base_est, &size, &mutual](const Finding& a, const Finding& b) {
+    const double hi = std::max(a.gain_percent, b.gain_percent);
+    const double lo = std::min(a.gain_percent, b.gain_percent);
+    const double left = std::max(100.0 - base_est - lo, 0.0);
+    // Clearly more only when not less on either part of the record: the
+    // smaller of the two gains hides a trial that loses far on the other.
+    const Finding& more = a.gain_percent > b.gain_percent ? a : b;
+    const Finding& less = a.gain_percent > b.gain_percent ? b : a;
+    if (hi >= margin && hi - lo > 0.2 * left &&
+        more.validation_gain_percent >= less.validation_gain_percent &&
+        more.estimation_gain_percent >= less.estimation_gain_percent)
+      return a.gain_percent > b.gain_percent;
+    const double sa = size[a.effect], sb = size[b.effect];
+    const bool occam = hi >= margin && !mutual(a.effect, b.effect);
+    if (occam && (sa + 1) >= 3 * (sb + 1)) return false;
+    if (occam && (sb + 1) >= 3 * (sa + 1)) return true;
+    if (std::abs(a.score - b.score) > 0.02) return a.score > b.score;
+    if (hi >= margin && sa != sb) return sa < sb;
+    return a.gain_percent > b.gain_percent;
+  };
+  // The rule is not transitive (a cycle: stiction over characteristic by gain, characteristic
+  // over a load by parameter count, the load over stiction by score): a sort would be undefined.
+  rank_by_wins(step.findings, ranks_above);
   // Two effects that the data cannot tell apart: say so rather than pretend. They are when their
   // trial models predict the same output (the two simulated outputs differ by much less than
   // either leaves unexplained) and gain about as much.
