@@ -27,6 +27,7 @@ struct FitArgs {
   std::string validate;
   std::string select_on = "estimation";
   std::string json, series;
+  std::string op_range;  // --op-range: stiction figures in % of this OP span
   bool no_merge = false;
   std::string model;  // a composable model instead of the Preisach identification
   std::vector<std::string> add, remove;
@@ -149,6 +150,7 @@ void add_fit(CLI::App& app, int& exit_code) {
       "(the paper)");
   auto a = std::make_shared<FitArgs>();
   add_data_options(cmd, a->in);
+  add_op_range_option(cmd, a->op_range);
 
   auto* g_m = "Model";
   cmd->add_option("--na-max", a->fit.na_max, "largest A order")->group(g_m)->capture_default_str();
@@ -233,8 +235,10 @@ void add_fit(CLI::App& app, int& exit_code) {
 
   cmd->callback([a, &exit_code] {
     std::vector<std::string> notes;
+    const OpRange range = parse_op_range(a->op_range);
     if (a->output == "mv" && a->in.csv.mv_column.empty()) a->in.csv.mv_column = "mv";
     LoopData d = load_data(a->in, notes);
+    if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     FitOptions& fo = a->fit;
     fo.method = a->method == "joint" ? FitMethod::Joint : FitMethod::Alternation;
     fo.stop_rule = a->stop == "cost" ? StopRule::CostDecrease : StopRule::ParameterChange;
@@ -258,7 +262,7 @@ void add_fit(CLI::App& app, int& exit_code) {
       exit_code = fit_spec(d, *a, fo, history);
       return;
     }
-    FitRun run = run_fit(d, fo, a->output);
+    FitRun run = run_fit(d, fo, a->output, range);
     if (!a->no_history && run.result.status == IdentificationStatus::Ok) {
       HistoryEntry h;
       h.model = "preisach";

@@ -6,10 +6,12 @@
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/fit_report.hpp"
+#include "valvediag/stiction_quantification.hpp"
 
 namespace valvediag::cli {
 
-FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output) {
+FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output,
+               const OpRange& range) {
   const std::string model =
       "this model (na <= " + std::to_string(fo.na_max) + ", nb <= " + std::to_string(fo.nb_max) +
       ", nk <= " + std::to_string(fo.nk_max) + ", L <= " + std::to_string(fo.L_max) + ")";
@@ -33,7 +35,11 @@ FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& outpu
   ctx.sample_period = d.sample_period();
   ctx.output_name = output;
   ctx.method = method_name(fo.method);
-  if (run.result.status == IdentificationStatus::Ok) ctx.stiction = fit_stiction(run.result, ctx);
+  if (run.result.status == IdentificationStatus::Ok) {
+    ctx.stiction = fit_stiction(run.result, ctx);  // in OP units: % when OP is 0..100
+    if (range.lo != 0.0 || range.hi != 100.0)
+      ctx.stiction = in_percent_of_span(*ctx.stiction, range.lo, range.hi);
+  }
   run.summary = format_summary(run.result, ctx);
   run.json = to_json(run.result, ctx);
   return run;

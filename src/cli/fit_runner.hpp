@@ -6,6 +6,7 @@
 
 #include "valvediag/identification.hpp"
 #include "valvediag/loop_data.hpp"
+#include "valvediag/loop_health.hpp"
 
 namespace valvediag::cli {
 
@@ -15,8 +16,10 @@ struct FitRun {
   nlohmann::json json;
 };
 
-// output: "pv" (process) or "mv" (valve position). Checks the data before fitting.
-FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output);
+// output: "pv" (process) or "mv" (valve position). Checks the data before fitting. The
+// stiction figures are in % of the valve's OP span `range`.
+FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output,
+               const OpRange& range = {});
 void write_series(const std::string& path, const LoopData& d, const FitRun& run);
 void write_text(const std::string& path, const std::string& text);
 

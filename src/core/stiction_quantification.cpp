@@ -236,6 +236,13 @@ std::string pct(double v, int prec = 1) {
   return buf;
 }
 
+// "stiction: fs .. % of travel (...) over OP lo-hi" + op_unit (" %" when OP is in %).
+std::string stiction_sentence(const StictionQuantification& q, const std::string& op_unit) {
+  return "stiction: fs " + pct(q.overall.fs_percent) + " %, fd " + pct(q.overall.fd_percent) +
+         " % of travel (band " + pct(q.overall.band_percent) + " %, slip jump " +
+         pct(q.overall.jump_percent) + " %) over OP " + pct(q.op_lo) + "-" + pct(q.op_hi) + op_unit;
+}
+
 // He's bands (fs, fd) of one OP region.
 struct Band {
   double fs, fd;
@@ -655,10 +662,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   }
 
   if (q.stiction) {
-    q.summary = "stiction: fs " + pct(q.overall.fs_percent) + " %, fd " +
-                pct(q.overall.fd_percent) + " % of travel (band " + pct(q.overall.band_percent) +
-                " %, slip jump " + pct(q.overall.jump_percent) + " %) over OP " + pct(q.op_lo) +
-                "-" + pct(q.op_hi) + " %";
+    q.summary = stiction_sentence(q, " %");
     if (!q.jump_identified)
       q.summary += "; the data's sweeps are too short to split the band into fs and fd";
   } else {
@@ -817,10 +821,37 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   }
   q.refined = true;
   q.overall = figures(bfs, bfd, bcost, fit.var_y());
-  q.summary = "stiction: fs " + pct(q.overall.fs_percent) + " %, fd " + pct(q.overall.fd_percent) +
-              " % of travel (band " + pct(q.overall.band_percent) + " %, slip jump " +
-              pct(q.overall.jump_percent) + " %) over OP " + pct(q.op_lo) + "-" + pct(q.op_hi) +
-              " %";
+  q.summary = stiction_sentence(q, " %");
+  return q;
+}
+
+StictionQuantification in_percent_of_span(StictionQuantification q, double op_lo, double op_hi) {
+  if (!(std::isfinite(op_lo) && std::isfinite(op_hi) && op_lo < op_hi))
+    throw std::invalid_argument("in_percent_of_span: needs op_lo < op_hi, both finite");
+  const double k = 100.0 / (op_hi - op_lo);
+  auto scale = [k](StictionFigures& f) {
+    f.fs_percent *= k;  // NaN stays NaN
+    f.fd_percent *= k;
+    f.band_percent *= k;
+    f.jump_percent *= k;
+  };
+  scale(q.overall);
+  scale(q.preisach);
+  for (auto& g : q.regions) {
+    scale(g.figures);
+    scale(g.preisach);
+  }
+  q.resolution_percent *= k;
+  q.scale /= k;
+  if (q.valid && q.stiction) {
+    q.summary = stiction_sentence(q, "") + " of the OP span " + pct(op_lo) + ":" + pct(op_hi) +
+                (q.jump_identified || q.refined
+                     ? ""
+                     : "; the data's sweeps are too short to split the band into fs and fd");
+  } else if (q.valid) {
+    q.summary = "no stiction resolved: the band is below the grid step " +
+                pct(q.resolution_percent) + " % of the OP span " + pct(op_lo) + ":" + pct(op_hi);
+  }
   return q;
 }
 

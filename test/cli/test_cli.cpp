@@ -286,6 +286,19 @@ TEST_CASE("diagnose reads friction from a recorded valve position") {
   CHECK(narrow.out.find("beyond the OP range 0:40: stiction and valve travel in % of travel "
                         "assume that range; give the valve's OP span with --op-range LO:HI") !=
         std::string::npos);
+  // fit's Preisach stiction figures likewise (paper Example 1, OP 41-59 %).
+  const std::string ex1 = tmp("ex1-span.csv");
+  REQUIRE(run("simulate --scenario paper-ex1 --samples 1500 --out " + ex1).status == 0);
+  REQUIRE(run("fit " + ex1 + " --no-history --json " + tmp("span100.json")).status == 0);
+  auto f200 = run("fit " + ex1 + " --no-history --op-range 0:200 --json " + tmp("span200.json"));
+  REQUIRE(f200.status == 0);
+  std::ifstream p100(tmp("span100.json")), p200(tmp("span200.json"));
+  const auto s100 = nlohmann::json::parse(p100)["stiction"];
+  const auto s200 = nlohmann::json::parse(p200)["stiction"];
+  REQUIRE(s100["stiction"] == true);
+  CHECK(s200["fs_percent"].get<double>() == doctest::Approx(s100["fs_percent"].get<double>() / 2));
+  CHECK(s200["fd_percent"].get<double>() == doctest::Approx(s100["fd_percent"].get<double>() / 2));
+  CHECK(s200["op_lo"].get<double>() == s100["op_lo"].get<double>());
   for (const char* bad : {"5", "9:3", "0:x", "nan:1"}) {
     auto b = run(one + "--op-range " + bad);
     CHECK_MESSAGE(b.status == 2, bad);

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -82,6 +83,33 @@ TEST_CASE("the figures do not depend on the output scale of the model") {
   CHECK(q2.overall.fs_percent == doctest::Approx(q1.overall.fs_percent));
   CHECK(q2.overall.fd_percent == doctest::Approx(q1.overall.fd_percent));
   CHECK(q2.scale == doctest::Approx(0.013 * q1.scale));
+}
+
+TEST_CASE("OP in other units than %: the figures in % of the OP span") {
+  // The same valve (fs 8.75 %, fd 3.75 % of travel) on an OP scale of 0..200: 17.5 and 7.5 OP
+  // units, whole steps of the grid (delta 2.5 OP units = 1.25 % of the span).
+  const PreisachGrid g{0.0, 200.0, 80};
+  const auto raw = quantify_stiction(valve_only(g, he_stiction_weights(g, 17.5, 7.5).mu));
+  REQUIRE(raw.stiction);
+  const auto q = in_percent_of_span(raw, 0.0, 200.0);
+  const double half = 1.25 / 2;
+  CHECK(std::abs(q.overall.fs_percent - 8.75) <= half);
+  CHECK(std::abs(q.overall.fd_percent - 3.75) <= half);
+  CHECK(q.overall.band_percent == doctest::Approx(raw.overall.band_percent / 2));
+  CHECK(q.overall.jump_percent == doctest::Approx(raw.overall.jump_percent / 2));
+  CHECK(q.resolution_percent == doctest::Approx(1.25));
+  CHECK(q.scale == doctest::Approx(2 * raw.scale));  // output per % of span, not per OP unit
+  CHECK(q.op_lo == raw.op_lo);                       // OP ranges stay in OP units
+  CHECK(q.op_hi == raw.op_hi);
+  REQUIRE(q.regions.size() == raw.regions.size());
+  for (std::size_t i = 0; i < q.regions.size(); ++i) {
+    CHECK(q.regions[i].figures.fs_percent ==
+          doctest::Approx(raw.regions[i].figures.fs_percent / 2));
+    CHECK(q.regions[i].op_lo == raw.regions[i].op_lo);
+  }
+  CHECK(q.summary.find("of the OP span 0.0:200.0") != std::string::npos);
+  CHECK_THROWS_AS(in_percent_of_span(raw, 5.0, 5.0), std::invalid_argument);
+  CHECK_THROWS_AS(in_percent_of_span(raw, 0.0, std::nan("")), std::invalid_argument);
 }
 
 TEST_CASE("a valve without hysteresis shows no stiction") {
