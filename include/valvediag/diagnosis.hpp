@@ -49,7 +49,7 @@ struct DiagnoseOptions {
   // verdict rests on the held-out trial fits and the limit cycle alone.
   bool whole_record = true;
   WholeRecordOptions whole_record_options;
-  // The valve-travel test, run when the valve position is given: its OP span (op_lo, op_hi)
+  // The valve-travel test, run when the valve position is given: its OP span (op_range)
   // turns friction into % of travel, so set it to the valve's OP range when OP is not 0..100.
   ValveTravelOptions valve_travel;
 };

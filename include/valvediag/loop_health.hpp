@@ -8,12 +8,9 @@
 #include <vector>
 
 #include "valvediag/loop_data.hpp"
+#include "valvediag/op_range.hpp"
 
 namespace valvediag {
-
-struct OpRange {
-  double lo = 0.0, hi = 100.0;  // the OP span the valve travels over, in OP units
-};
 
 struct LoopHealth {
   std::size_t samples = 0;

@@ -60,6 +60,7 @@
 #include <vector>
 
 #include "valvediag/hammerstein.hpp"
+#include "valvediag/op_range.hpp"
 
 namespace valvediag {
 
@@ -129,11 +130,11 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
                                          const std::vector<double>& pv,
                                          const StictionQuantificationOptions& opt = {});
 
-// The figures in % of a valve whose OP span is op_lo..op_hi (OP in other units than %; the
-// figures above are in OP units, so % only for a 0..100 span): fs, fd, band, jump and the
-// resolution, overall and per region, times 100 / (op_hi - op_lo), and `scale` per % of that
-// span. OP ranges (op_lo, op_hi of the probe and the regions) stay in OP units. Throws
-// std::invalid_argument unless op_lo < op_hi, both finite.
-StictionQuantification in_percent_of_span(StictionQuantification q, double op_lo, double op_hi);
+// The figures in % of a valve whose OP span is `span` (OP in other units than %; the figures
+// above are in OP units, so % only for a 0..100 span): fs, fd, band, jump and the resolution,
+// overall and per region, times 100 / (span.hi - span.lo), and `scale` per % of that span. OP
+// ranges (op_lo, op_hi of the probe and the regions) stay in OP units. Throws
+// std::invalid_argument unless span.lo < span.hi, both finite.
+StictionQuantification in_percent_of_span(StictionQuantification q, const OpRange& span);
 
 }  // namespace valvediag

@@ -23,11 +23,13 @@
 #include <string>
 #include <vector>
 
+#include "valvediag/op_range.hpp"
+
 namespace valvediag {
 
 struct ValveTravelOptions {
-  double op_lo = 0.0, op_hi = 100.0;  // the valve's OP span: % of travel
-  double validation_fraction = 0.3;   // last part held out
+  OpRange op_range;                  // the valve's OP span: % of travel
+  double validation_fraction = 0.3;  // last part held out
   std::size_t min_samples = 200;
   int map_degree = 3;       // travel -> transmitted position: a polynomial (1: gain and offset)
   double max_lag_s = 60.0;  // actuator time constants searched: 0 .. this

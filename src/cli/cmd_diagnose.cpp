@@ -63,8 +63,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     DiagnoseOptions o;
-    o.valve_travel.op_lo = range.lo;
-    o.valve_travel.op_hi = range.hi;
+    o.valve_travel.op_range = range;
     o.validation_fraction = a->validate;
     o.min_gain_percent = a->min_gain;
     o.candidates = a->candidates;

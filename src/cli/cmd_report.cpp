@@ -161,8 +161,7 @@ void add_report(CLI::App& app, int& exit_code) {
     if (!a->no_diagnose) {
       DiagnoseOptions o;
       o.validation_fraction = a->validate;
-      o.valve_travel.op_lo = range.lo;
-      o.valve_travel.op_hi = range.hi;
+      o.valve_travel.op_range = range;
       try {
         diag = diagnose(d.op, d.pv, d.mv, Ts, *spec, o);
         fit = diag.steps.front().fit;

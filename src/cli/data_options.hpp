@@ -11,7 +11,7 @@
 
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/loop_data.hpp"
-#include "valvediag/loop_health.hpp"
+#include "valvediag/op_range.hpp"
 
 namespace valvediag::cli {
 

@@ -37,8 +37,7 @@ FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& outpu
   ctx.method = method_name(fo.method);
   if (run.result.status == IdentificationStatus::Ok) {
     ctx.stiction = fit_stiction(run.result, ctx);  // in OP units: % when OP is 0..100
-    if (range.lo != 0.0 || range.hi != 100.0)
-      ctx.stiction = in_percent_of_span(*ctx.stiction, range.lo, range.hi);
+    if (range != OpRange{}) ctx.stiction = in_percent_of_span(*ctx.stiction, range);
   }
   run.summary = format_summary(run.result, ctx);
   run.json = to_json(run.result, ctx);

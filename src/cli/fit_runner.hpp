@@ -6,7 +6,7 @@
 
 #include "valvediag/identification.hpp"
 #include "valvediag/loop_data.hpp"
-#include "valvediag/loop_health.hpp"
+#include "valvediag/op_range.hpp"
 
 namespace valvediag::cli {
 

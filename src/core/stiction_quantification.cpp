@@ -825,7 +825,8 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   return q;
 }
 
-StictionQuantification in_percent_of_span(StictionQuantification q, double op_lo, double op_hi) {
+StictionQuantification in_percent_of_span(StictionQuantification q, const OpRange& span) {
+  const double op_lo = span.lo, op_hi = span.hi;
   if (!(std::isfinite(op_lo) && std::isfinite(op_hi) && op_lo < op_hi))
     throw std::invalid_argument("in_percent_of_span: needs op_lo < op_hi, both finite");
   const double k = 100.0 / (op_hi - op_lo);

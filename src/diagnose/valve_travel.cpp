@@ -309,7 +309,7 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
                           static_cast<double>(op.size()), static_cast<double>(opt.min_samples));
     return v;
   }
-  const double width = std::max(opt.op_hi - opt.op_lo, 1e-12);
+  const double width = std::max(opt.op_range.hi - opt.op_range.lo, 1e-12);
   const double to_pct = 100.0 / width;
   const auto [op_min, op_max] = std::minmax_element(op.begin(), op.end());
   const auto [mv_min, mv_max] = std::minmax_element(mv.begin(), mv.end());

@@ -129,8 +129,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   }
   Diagnosis dg;
   DiagnoseOptions dopt = opt.diagnose;
-  dopt.valve_travel.op_lo = opt.range.lo;
-  dopt.valve_travel.op_hi = opt.range.hi;
+  dopt.valve_travel.op_range = opt.range;
   try {
     dg = diagnose_auto(d.op, d.pv, d.mv, d.sample_period(), ModelSpec{}, dopt);
   } catch (const std::invalid_argument& e) {

@@ -91,7 +91,7 @@ TEST_CASE("OP in other units than %: the figures in % of the OP span") {
   const PreisachGrid g{0.0, 200.0, 80};
   const auto raw = quantify_stiction(valve_only(g, he_stiction_weights(g, 17.5, 7.5).mu));
   REQUIRE(raw.stiction);
-  const auto q = in_percent_of_span(raw, 0.0, 200.0);
+  const auto q = in_percent_of_span(raw, OpRange{0.0, 200.0});
   const double half = 1.25 / 2;
   CHECK(std::abs(q.overall.fs_percent - 8.75) <= half);
   CHECK(std::abs(q.overall.fd_percent - 3.75) <= half);
@@ -108,8 +108,8 @@ TEST_CASE("OP in other units than %: the figures in % of the OP span") {
     CHECK(q.regions[i].op_lo == raw.regions[i].op_lo);
   }
   CHECK(q.summary.find("of the OP span 0.0:200.0") != std::string::npos);
-  CHECK_THROWS_AS(in_percent_of_span(raw, 5.0, 5.0), std::invalid_argument);
-  CHECK_THROWS_AS(in_percent_of_span(raw, 0.0, std::nan("")), std::invalid_argument);
+  CHECK_THROWS_AS(in_percent_of_span(raw, OpRange{5.0, 5.0}), std::invalid_argument);
+  CHECK_THROWS_AS(in_percent_of_span(raw, OpRange{0.0, std::nan("")}), std::invalid_argument);
 }
 
 TEST_CASE("a valve without hysteresis shows no stiction") {
