@@ -533,20 +533,28 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
   return d;
 }
 
+namespace {
+
+// The valve-travel test added to a diagnosis, when the valve position is recorded.
+Diagnosis with_valve_travel(Diagnosis d, const std::vector<double>& u,
+                            const std::vector<double>& mv, double Ts,
+                            const ValveTravelOptions& opt) {
+  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, opt);
+  return d;
+}
+
+}  // namespace
+
 Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y,
                    const std::vector<double>& mv, double Ts, const ModelSpec& model,
                    const DiagnoseOptions& opt) {
-  Diagnosis d = diagnose(u, y, Ts, model, opt);
-  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, opt.valve_travel);
-  return d;
+  return with_valve_travel(diagnose(u, y, Ts, model, opt), u, mv, Ts, opt.valve_travel);
 }
 
 Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y,
                         const std::vector<double>& mv, double Ts, const ModelSpec& start,
                         const DiagnoseOptions& opt) {
-  Diagnosis d = diagnose_auto(u, y, Ts, start, opt);
-  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, opt.valve_travel);
-  return d;
+  return with_valve_travel(diagnose_auto(u, y, Ts, start, opt), u, mv, Ts, opt.valve_travel);
 }
 
 }  // namespace valvediag
