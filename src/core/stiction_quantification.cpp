@@ -236,11 +236,20 @@ std::string pct(double v, int prec = 1) {
   return buf;
 }
 
-// "stiction: fs .. % of travel (...) over OP lo-hi" + op_unit (" %" when OP is in %).
-std::string stiction_sentence(const StictionQuantification& q, const std::string& op_unit) {
+// The summary of a valid quantification: "stiction: fs .. % of travel (...) over OP lo-hi %", or
+// that no stiction is resolved. `span`: "" when OP is in %, else " of the OP span lo:hi"
+// (in_percent_of_span), said after the figures' range in place of " %".
+std::string stiction_sentence(const StictionQuantification& q, const std::string& span = "") {
+  if (!q.stiction)
+    return "no stiction resolved: the band is below the grid step " + pct(q.resolution_percent) +
+           " %" + span;
   return "stiction: fs " + pct(q.overall.fs_percent) + " %, fd " + pct(q.overall.fd_percent) +
          " % of travel (band " + pct(q.overall.band_percent) + " %, slip jump " +
-         pct(q.overall.jump_percent) + " %) over OP " + pct(q.op_lo) + "-" + pct(q.op_hi) + op_unit;
+         pct(q.overall.jump_percent) + " %) over OP " + pct(q.op_lo) + "-" + pct(q.op_hi) +
+         (span.empty() ? " %" : span) +
+         (q.jump_identified || q.refined
+              ? ""
+              : "; the data's sweeps are too short to split the band into fs and fd");
 }
 
 // He's bands (fs, fd) of one OP region.
@@ -661,13 +670,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
           reg.figures.jump_percent = 0.0;
   }
 
-  if (q.stiction) {
-    q.summary = stiction_sentence(q, " %");
-    if (!q.jump_identified)
-      q.summary += "; the data's sweeps are too short to split the band into fs and fd";
-  } else {
-    q.summary = "no stiction resolved: the band is below the grid step " + pct(delta) + " %";
-  }
+  q.summary = stiction_sentence(q);
   q.preisach = q.overall;
   for (auto& reg : q.regions) reg.preisach = reg.figures;
   return q;
@@ -821,7 +824,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   }
   q.refined = true;
   q.overall = figures(bfs, bfd, bcost, fit.var_y());
-  q.summary = stiction_sentence(q, " %");
+  q.summary = stiction_sentence(q);
   return q;
 }
 
@@ -844,15 +847,7 @@ StictionQuantification in_percent_of_span(StictionQuantification q, const OpRang
   }
   q.resolution_percent *= k;
   q.scale /= k;
-  if (q.valid && q.stiction) {
-    q.summary = stiction_sentence(q, "") + " of the OP span " + pct(op_lo) + ":" + pct(op_hi) +
-                (q.jump_identified || q.refined
-                     ? ""
-                     : "; the data's sweeps are too short to split the band into fs and fd");
-  } else if (q.valid) {
-    q.summary = "no stiction resolved: the band is below the grid step " +
-                pct(q.resolution_percent) + " % of the OP span " + pct(op_lo) + ":" + pct(op_hi);
-  }
+  if (q.valid) q.summary = stiction_sentence(q, " of the OP span " + pct(op_lo) + ":" + pct(op_hi));
   return q;
 }
 
