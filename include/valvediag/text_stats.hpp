@@ -1,6 +1,6 @@
-// Two small helpers the diagnosis library's files shared as private copies: a printf into a
-// std::string for their one-sentence summaries, and order statistics for robust noise and span
-// figures. Standard library only.
+// Small helpers the diagnosis and io libraries' files shared as private copies: a printf into a
+// std::string (and a number in %.6g) for their one-sentence summaries and messages, and order
+// statistics for robust noise and span figures. Standard library only.
 #pragma once
 
 #include <algorithm>
@@ -26,6 +26,11 @@ namespace valvediag {
   if (n > 0) std::vsnprintf(s.data(), s.size() + 1, format, again);
   va_end(again);
   return s;
+}
+
+// v as printf's "%.6g": the short form in which the readers and data checks quote values.
+inline std::string num6g(double v) {
+  return strprintf("%.6g", v);
 }
 
 // The sample at rank round(p (n - 1)) of v (0 <= p <= 1): no interpolation, so the median of an

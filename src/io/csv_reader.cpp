@@ -13,6 +13,7 @@
 
 #include "time_parse.hpp"
 #include "valvediag/data_error.hpp"
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 namespace {
@@ -39,12 +40,6 @@ std::string show(std::string_view s) {
   }
   if (s.size() > kMax) out += "...";
   return out + "'";
-}
-
-std::string num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
-  return buf;
 }
 
 // Physical lines; the line end is LF (optionally after CR), or CR alone in files without LF.
@@ -404,7 +399,7 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
   if (opt.sample_period && !(std::isfinite(*opt.sample_period) && *opt.sample_period > 0))
     throw DataError(
         file, 0, "",
-        "--sample-period must be a positive number of seconds, not " + num(*opt.sample_period));
+        "--sample-period must be a positive number of seconds, not " + num6g(*opt.sample_period));
   if (no_time && !opt.sample_period)
     throw DataError(file, 0, "", "without a time column (--t none) --sample-period is needed");
 
@@ -604,7 +599,7 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
       if (c.index != kNone)
         s += std::string(s.back() == ':' ? " " : ", ") + c.role + " = " + show(c.name) + " (" +
              std::to_string(c.index + 1) + ")";
-    if (no_time) s += "; no time column, rows " + num(*opt.sample_period) + " s apart";
+    if (no_time) s += "; no time column, rows " + num6g(*opt.sample_period) + " s apart";
     notes->push_back(s);
   }
 
@@ -631,17 +626,17 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
   if (!opt.resample) {
     if (irregular > 0)
       throw DataError(file, row_line[worst + 1], ct.name,
-                      "irregular sampling: the step to this row is " + num(dt[worst]) +
-                          " s, the median step is " + num(median) + " s (max deviation " +
-                          num(max_dev) + " s; " + std::to_string(irregular) + " of " +
+                      "irregular sampling: the step to this row is " + num6g(dt[worst]) +
+                          " s, the median step is " + num6g(median) + " s (max deviation " +
+                          num6g(max_dev) + " s; " + std::to_string(irregular) + " of " +
                           std::to_string(dt.size()) + " steps are more than " +
-                          num(kSamplingTolerance * 100) +
+                          num6g(kSamplingTolerance * 100) +
                           " % off); use --resample to interpolate onto a uniform grid",
                       ct.role);
     if (period_differs)
       throw DataError(file, 0, ct.name,
-                      "the rows are " + num(median) + " s apart, but --sample-period is " +
-                          num(*opt.sample_period) +
+                      "the rows are " + num6g(median) + " s apart, but --sample-period is " +
+                          num6g(*opt.sample_period) +
                           " (leave it out, or add --resample to resample the data)",
                       ct.role);
   }
@@ -660,14 +655,14 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
         std::min(kMaxGridPoints, std::max(1e6, 100.0 * static_cast<double>(n)));
     if (!(steps + 1 <= max_points))
       throw DataError(file, 0, ct.name,
-                      "resampling " + num(span) + " s at " + num(grid) + " s would give " +
-                          num(steps + 1) + " samples (choose a larger --sample-period)",
+                      "resampling " + num6g(span) + " s at " + num6g(grid) + " s would give " +
+                          num6g(steps + 1) + " samples (choose a larger --sample-period)",
                       ct.role);
     if (steps < 1)
-      throw DataError(
-          file, 0, ct.name,
-          "the data span " + num(span) + " s, less than one --sample-period of " + num(grid) + " s",
-          ct.role);
+      throw DataError(file, 0, ct.name,
+                      "the data span " + num6g(span) + " s, less than one --sample-period of " +
+                          num6g(grid) + " s",
+                      ct.role);
     const std::size_t m = static_cast<std::size_t>(steps) + 1;
     std::vector<double> nt(m);
     std::vector<std::size_t> seg(m);  // left sample of the interval holding each grid point
@@ -688,7 +683,7 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
         if (!std::isfinite(out[k])) out[k] = (1 - w[k]) * a + w[k] * b;  // b - a overflowed
         if (!std::isfinite(out[k]))
           throw DataError(file, row_line[seg[k] + 1], c.name,
-                          "values too large to interpolate (" + num(a) + ", " + num(b) + ")",
+                          "values too large to interpolate (" + num6g(a) + ", " + num6g(b) + ")",
                           c.role);
       }
       v = std::move(out);
@@ -700,10 +695,10 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
     if (notes) {
       const auto [lo, hi] = std::minmax_element(dt.begin(), dt.end());
       const std::size_t gap = static_cast<std::size_t>(hi - dt.begin());
-      std::string s = "resampled " + std::to_string(n) + " rows onto a uniform " + num(grid) +
+      std::string s = "resampled " + std::to_string(n) + " rows onto a uniform " + num6g(grid) +
                       " s grid (" + (opt.sample_period ? "--sample-period" : "the median step") +
                       "): " + std::to_string(m) + " samples; the steps in the file ranged from " +
-                      num(*lo) + " to " + num(*hi) + " s (largest before line " +
+                      num6g(*lo) + " to " + num6g(*hi) + " s (largest before line " +
                       std::to_string(row_line[gap + 1]) + ")";
       if (*hi > 2 * grid) s += "; values inside gaps are interpolated, not measured";
       notes->push_back(s);
@@ -716,7 +711,7 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
   const auto [op_min, op_max] = std::minmax_element(d.op.begin(), d.op.end());
   if (*op_min == *op_max)
     throw DataError(file, 0, cop.name,
-                    "constant at " + num(*op_min) + " in all " + std::to_string(d.size()) +
+                    "constant at " + num6g(*op_min) + " in all " + std::to_string(d.size()) +
                         (resampled ? " resampled samples" : " rows") +
                         ": nothing to identify (is " + cop.flag + " the controller output?)",
                     cop.role);

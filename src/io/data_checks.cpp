@@ -2,25 +2,19 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <string>
 
 #include "valvediag/data_error.hpp"
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 namespace {
-
-std::string num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
-  return buf;
-}
 
 void check_finite(const LoopData& d, const std::vector<double>& v, const char* name) {
   for (std::size_t i = 0; i < v.size(); ++i)
     if (!std::isfinite(v[i]))
       throw DataError(d.source, 0, name,
-                      "sample " + std::to_string(i + 1) + " is " + num(v[i]) +
+                      "sample " + std::to_string(i + 1) + " is " + num6g(v[i]) +
                           " (NaN or infinite values cannot be used)");
 }
 
@@ -47,7 +41,7 @@ void check_loop_data(const LoopData& d) {
     if (!(d.t[i] > d.t[i - 1]))
       throw DataError(d.source, 0, "t",
                       "time does not increase at sample " + std::to_string(i + 1) +
-                          " (t = " + num(d.t[i]) + " s after " + num(d.t[i - 1]) + " s)");
+                          " (t = " + num6g(d.t[i]) + " s after " + num6g(d.t[i - 1]) + " s)");
 }
 
 void check_identifiable_data(const LoopData& d, std::size_t min_samples, std::string_view model) {
@@ -63,7 +57,7 @@ void check_identifiable_data(const LoopData& d, std::size_t min_samples, std::st
     const auto [lo, hi] = std::minmax_element(v.begin(), v.end());
     if (*lo == *hi)
       throw DataError(d.source, 0, name,
-                      "constant at " + num(*lo) + " in all " + std::to_string(v.size()) +
+                      "constant at " + num6g(*lo) + " in all " + std::to_string(v.size()) +
                           " samples: nothing to identify (" + hint + ")");
   };
   constant(d.op, "op", "the controller output must move; is it the right column?");

@@ -18,6 +18,7 @@
 #include <string_view>
 
 #include "valvediag/data_error.hpp"
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 namespace {
@@ -74,12 +75,6 @@ std::string printable(const char* s) {
   for (char& c : o)
     if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e) c = '?';
   return o;
-}
-
-std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
 }
 
 // Number of elements, 0 on overflow or a bad rank.
@@ -619,11 +614,11 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
       for (std::size_t i = 1; i < d.t.size(); ++i)
         if (std::abs(d.t[i] - d.t[i - 1] - median) > 0.01 * median)
           throw fail("irregular sampling in time column " + o.t + " at row " +
-                     std::to_string(i + 1) + " (step " + num(d.t[i] - d.t[i - 1]) + " s, median " +
-                     num(median) + " s); export it to CSV and use --resample");
+                     std::to_string(i + 1) + " (step " + num6g(d.t[i] - d.t[i - 1]) +
+                     " s, median " + num6g(median) + " s); export it to CSV and use --resample");
       if (period && std::abs(*period - median) > 0.01 * median)
-        throw fail("the sample period " + num(*period) + " s disagrees with time column " + o.t +
-                   " (" + num(median) + " s)");
+        throw fail("the sample period " + num6g(*period) + " s disagrees with time column " + o.t +
+                   " (" + num6g(median) + " s)");
     } else {
       if (!period)
         throw fail("a " + shape + " has no sample period: give it (--sample-period S, s)");
@@ -633,7 +628,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
     note("read " + where + " (" + shape + "): op column " + o.op +
          (d.pv.empty() ? "" : ", pv column " + o.pv) + (d.sp.empty() ? "" : ", sp column " + o.sp) +
          (d.mv.empty() ? "" : ", mv column " + o.mv) +
-         (time_column ? ", t column " + o.t : ", Ts " + num(*period) + " s"));
+         (time_column ? ", t column " + o.t : ", Ts " + num6g(*period) + " s"));
   } else {
     const Fields& fs = f.fields;
     auto get = [&](const std::string& spec, const char* role, bool required) {
@@ -670,7 +665,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
     if (tsv != nullptr && element_count(tsv) > 0 && !ts)
       throw fail("field Ts must be one positive number of seconds, but is " + describe(tsv));
     if (ts && period && std::abs(*ts - *period) > 0.01 * *ts)
-      throw fail("the sample period " + num(*period) + " s disagrees with Ts = " + num(*ts) +
+      throw fail("the sample period " + num6g(*period) + " s disagrees with Ts = " + num6g(*ts) +
                  " s in the file");
     if (!ts && !period)
       throw fail("no Ts field (fields present: " + field_names(fs) +
@@ -682,7 +677,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
     if (!d.pv.empty()) used += ", pv";
     if (!d.sp.empty()) used += ", sp";
     if (!d.mv.empty()) used += ", mv";
-    note("read " + where + ": " + used + ", Ts " + num(P) + " s" + (ts ? "" : " (given)") +
+    note("read " + where + ": " + used + ", Ts " + num6g(P) + " s" + (ts ? "" : " (given)") +
          (d.pv.empty() ? "; no PV field" : ""));
   }
   // Aligned, finite series of at least two samples.
@@ -693,7 +688,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
                  std::to_string(d.op.size()) + " (the series must be aligned)");
     for (std::size_t i = 0; i < v.size(); ++i)
       if (!std::isfinite(v[i]))
-        throw fail(std::string(name) + " sample " + std::to_string(i + 1) + " is " + num(v[i]) +
+        throw fail(std::string(name) + " sample " + std::to_string(i + 1) + " is " + num6g(v[i]) +
                    " (NaN or infinite values cannot be used)");
   };
   check(d.op, "op");
