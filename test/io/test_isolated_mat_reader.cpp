@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <system_error>
 #include <vector>
 
 #include "../../src/cli/isolated_mat_reader.hpp"
@@ -23,12 +24,20 @@ namespace {
 
 const std::string kDamaged = std::string(VALVEDIAG_TEST_DIR) + "/io/damaged-mat/";
 
-std::string tmp_file(const std::string& name) {
-  const fs::path dir =
+// A scratch directory removed with its files when the test ends, passed or failed (the readers'
+// child processes leave by _exit, so only this process removes it).
+struct TempDir {
+  fs::path path =
       fs::temp_directory_path() / ("valvediag_test_isomat_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return (dir / name).string();
-}
+  TempDir() { fs::create_directories(path); }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  std::string file(const std::string& name) const { return (path / name).string(); }
+};
 
 // Bit for bit: NaN and -0.0 must cross the process boundary unchanged.
 bool same_bits(const std::vector<double>& a, const std::vector<double>& b) {
@@ -50,8 +59,9 @@ DataError data_error_of(F&& f) {
 }  // namespace
 
 TEST_CASE("a .mat file read in a child process gives the same loops, notes and errors") {
+  const TempDir tmp;
   for (const mat_ft version : {MAT_FT_MAT5, MAT_FT_MAT73}) {
-    const std::string mat = tmp_file(version == MAT_FT_MAT5 ? "runs5.mat" : "runs73.mat");
+    const std::string mat = tmp.file(version == MAT_FT_MAT5 ? "runs5.mat" : "runs73.mat");
     test::write_runs_file(mat, version);
     {
       // A loop whose OP holds a NaN and a negative zero: the reader must refuse or keep them
@@ -106,7 +116,7 @@ TEST_CASE("a .mat file read in a child process gives the same loops, notes and e
     CHECK(b.line == a.line);
     CHECK(b.column == a.column);
   }
-  const std::string text = tmp_file("text.mat");
+  const std::string text = tmp.file("text.mat");
   std::ofstream(text) << std::string(300, 'x');
   const DataError e = data_error_of([&] { (void)cli::list_mat_loops_isolated(text); });
   CHECK(std::string(e.what()).find("not a MATLAB v5/v7/v7.3 MAT-file") != std::string::npos);

@@ -11,7 +11,9 @@
 #include <fstream>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 #include <thread>
+#include <utility>
 
 #include "../../src/cli/isolated_jobs.hpp"
 #include "valvediag/loop_assessment.hpp"
@@ -21,6 +23,27 @@
 
 using namespace valvediag;
 namespace fs = std::filesystem;
+
+namespace {
+
+// A database file and the -wal and -shm files SQLite keeps beside it, removed when the test ends.
+// Declared before the connections, so they are closed first: a database removed while still open
+// leaves its -wal and -shm behind.
+struct TempDb {
+  fs::path path;
+  explicit TempDb(fs::path p) : path(std::move(p)) { remove(); }
+  ~TempDb() { remove(); }
+  TempDb(const TempDb&) = delete;
+  TempDb& operator=(const TempDb&) = delete;
+  void remove() const {
+    for (const char* suffix : {"", "-wal", "-shm"}) {
+      std::error_code ec;
+      fs::remove(path.string() + suffix, ec);
+    }
+  }
+};
+
+}  // namespace
 
 TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean one is not") {
   const LoopData sticky = run_scenario(scenario_by_name("paper-ex1"), 1, 3000);
@@ -154,9 +177,9 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
 }
 
 TEST_CASE("the results store keeps each sweep and gives a loop's trend, oldest first") {
-  const fs::path db =
-      fs::temp_directory_path() / ("valvediag-store-" + std::to_string(::getpid()) + ".sqlite");
-  fs::remove(db);
+  const TempDb tmp(fs::temp_directory_path() /
+                   ("valvediag-store-" + std::to_string(::getpid()) + ".sqlite"));
+  const fs::path& db = tmp.path;
   {
     SweepStore store(db.string());
     for (int k = 0; k < 3; ++k) {
@@ -180,7 +203,6 @@ TEST_CASE("the results store keeps each sweep and gives a loop's trend, oldest f
   CHECK(again.trend("NOPE").empty());
   CHECK(again.assessed_loops() == std::vector<std::string>{"FIC101"});
   CHECK(!recorded_end_s(db.string(), "FIC101"));  // no recording tables: an error, not a guess
-  fs::remove(db);
 }
 
 TEST_CASE("isolated jobs: results, exceptions, crashes and time limits stay with their job") {
