@@ -15,15 +15,16 @@ namespace valvediag {
 struct LoopHealth {
   std::size_t samples = 0;
   double duration_s = 0.0;
-  // Oscillation of the control error (SP - PV, or PV about its mean without SP), detected from
-  // the zero crossings of its autocorrelation (Thornhill, Huang and Zhang 2003): regular when
-  // the spread of the half-periods is small against their mean (regularity > 1).
+  // Oscillation of the control error (SP - PV, or PV without SP; OP when PV was not recorded),
+  // about its straight line over the record, detected from the zero crossings of its
+  // autocorrelation (Thornhill, Huang and Zhang 2003): regular when the spread of the half-periods
+  // is small against their mean (regularity > 1).
   bool oscillating = false;
-  double period_s = 0.0;               // 0 when no period is found
-  double regularity = 0.0;             // mean half-period / (3 std of half-periods); > 1: regular
-  double amplitude = 0.0;              // of the error: half the median peak-to-peak over periods
-  std::string signal;                  // "sp-pv" or "pv": what was analysed
-  double op_reversals_per_hour = 0.0;  // direction changes beyond the OP noise band
+  double period_s = 0.0;    // 0 when no period is found
+  double regularity = 0.0;  // mean half-period / (3 std of half-periods); > 1: regular
+  double amplitude = 0.0;   // of that signal about its line: sqrt(2) x RMS (a sine's amplitude)
+  std::string signal;       // "sp-pv", "pv" or "op": what was analysed
+  double op_reversals_per_hour = 0.0;       // direction changes beyond the OP noise band
   double op_travel_percent_per_hour = 0.0;  // OP path length, % of the OP range per hour
   double time_at_limits_percent = 0.0;      // OP within 0.5 % of the range of either end
   double op_noise = 0.0;                    // OP noise level used as the reversal band, OP units
@@ -33,9 +34,10 @@ struct LoopHealth {
 // `range`: the valve's OP span (site config); data outside it count as at the limit.
 LoopHealth loop_health(const LoopData& d, const OpRange& range = {});
 
-// Why a record cannot carry a model, or "" when it can: too few samples, OP not moving
-// (span within its noise, or fewer than 4 reversals), OP at its limits nearly all the time,
-// PV flat, or an OP that visits too few levels to identify the Preisach weights (paper section 5).
+// Why a record cannot carry a model, or "" when it can: no PV recorded, too few samples, OP not
+// moving (span within its noise, or fewer than 4 reversals), OP at its limits nearly all the
+// time, PV flat, or an OP that visits too few levels to identify the Preisach weights (paper
+// section 5).
 std::string unusable_reason(const LoopData& d, const LoopHealth& h, std::size_t min_samples = 200);
 
 }  // namespace valvediag

@@ -2,6 +2,8 @@
 // checked, diagnosed (diagnose --auto) and ranked; results go to the site database, a results
 // file (what a shard writes and sweep-merge reads), CSV and HTML. Loops run in child processes
 // with a time limit, so one bad loop never stops the sweep.
+#include <fnmatch.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -14,6 +16,7 @@
 #include "data_options.hpp"
 #include "fit_runner.hpp"
 #include "isolated_jobs.hpp"
+#include "isolated_mat_reader.hpp"
 #include "stop_signal.hpp"
 #include "valvediag/bus_factory.hpp"
 #include "valvediag/data_error.hpp"
@@ -59,6 +62,7 @@ struct LoopJob {
   std::string name;
   std::string file;  // data file (file mode)
   OpRange range;
+  std::string mat_loop;  // the loop's path inside a .mat file holding several
 };
 
 struct SweepArgs {
@@ -92,6 +96,8 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
     if (!job.file.empty()) {
       DataOptions in = a.layout;
       in.data = job.file;
+      in.loop = job.mat_loop;
+      in.require_pv = false;  // an OP-only loop still gives its OP figures
       d = load_data(in, notes);
     } else {
       const auto end = recorded_end_s(a.db, job.name);
@@ -184,6 +190,56 @@ void write_outputs(const SweepArgs& a, const SweepInfo& info,
   }
 }
 
+// --loops: names, or shell patterns (benchmark.chemicals.*) when they hold * ? or [.
+bool selected(const std::vector<std::string>& wanted, const std::string& name) {
+  if (wanted.empty()) return true;
+  for (const auto& w : wanted)
+    if (w == name || fnmatch(w.c_str(), name.c_str(), 0) == 0) return true;
+  return false;
+}
+
+// A name or pattern of --loops that selects none of `names`: a typo, said before any work.
+void check_selection(const std::vector<std::string>& wanted, const std::vector<std::string>& names,
+                     const std::string& where) {
+  for (const auto& w : wanted)
+    if (std::none_of(names.begin(), names.end(),
+                     [&](const std::string& n) { return selected({w}, n); })) {
+      std::string list;
+      for (std::size_t i = 0; i < names.size() && i < 20; ++i) list += (i ? ", " : "") + names[i];
+      if (names.size() > 20) list += ", ... (" + std::to_string(names.size() - 20) + " more)";
+      throw UsageError("--loops: no loop '" + w + "' in " + where + "; its loops: " + list);
+    }
+}
+
+// The loops of the data files: one per CSV file; one per loop of a .mat file that holds
+// several (an International Stiction Database file holds a hundred). A .mat file that cannot
+// be listed stays one job, whose reading then reports why.
+std::vector<LoopJob> file_jobs(const std::vector<std::string>& files, const OpRange& range) {
+  std::vector<LoopJob> jobs;
+  for (const auto& f : files) {
+    const std::string stem = fs::path(f).stem().string();
+    if (is_mat_file(f)) {
+      try {
+        const MatFileInfo info = list_mat_loops_isolated(f);
+        if (info.loops.size() > 1) {
+          for (const auto& l : info.loops) jobs.push_back({l.path, f, range, l.path});
+          continue;
+        }
+      } catch (const DataError&) {
+      } catch (const std::runtime_error&) {
+      }
+    }
+    jobs.push_back({stem, f, range, ""});
+  }
+  std::set<std::string> seen;
+  for (auto& j : jobs) {
+    const std::string base = j.name;
+    for (int k = 2; seen.count(j.name); ++k) j.name = base + "#" + std::to_string(k);
+    seen.insert(j.name);
+  }
+  return jobs;
+}
+
 // Records the selected loops for `duration_s` before the sweep (--record).
 void record_first(const SweepArgs& a, const std::vector<std::string>& loops, double duration_s,
                   const std::atomic<bool>& stop) {
@@ -218,16 +274,21 @@ void add_sweep(CLI::App& app, int& exit_code) {
       "  valvediag sweep loops/*.txt --delimiter tab --skip-lines 2 --skip-after-header 2 \\\n"
       "      --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV'   (data "
       "files)\n"
+      "  valvediag sweep isdb.mat --loops 'isdb.chemicals.*'     (the loops of a .mat file)\n"
       "Each loop runs in its own process with a time limit: a bad loop is reported and the sweep "
       "goes on.\n"
       "Exit status 0 when the sweep ran (findings are results); 2 for bad options or config; 1 "
       "when it could not run.");
   auto a = std::make_shared<SweepArgs>();
-  cmd->add_option("files", a->files, "data files to sweep instead of a site (one loop each)");
+  cmd->add_option("files", a->files,
+                  "data files to sweep instead of a site: one loop per CSV file, every loop of a "
+                  ".mat file");
   cmd->add_option("--config", a->config, "site TOML: the loops and their OP ranges");
   cmd->add_option("--db", a->db,
                   "site database: recordings are read from it and results stored in it");
-  cmd->add_option("--loops", a->loops, "comma-separated loop names (default: all of the site)");
+  cmd->add_option("--loops", a->loops,
+                  "comma-separated loop names or patterns (benchmark.chemicals.*); default: all "
+                  "of the site, or of the files (every loop of a .mat file)");
   cmd->add_option("--window", a->window, "latest recorded window per loop: 30m, 4h, 1d")
       ->capture_default_str();
   cmd->add_option("--record", a->record, "record this long first (reads only), e.g. 10m");
@@ -271,28 +332,21 @@ void add_sweep(CLI::App& app, int& exit_code) {
     if (!a->shard.empty()) shard = parse_shard(a->shard);
 
     std::vector<LoopJob> jobs;
+    const auto wanted = split_names(a->loops);
     if (site_mode) {
       const SiteConfig site = load_site_config(a->config);  // config errors before anything
-      const auto wanted = split_names(a->loops);
-      for (const auto& w : wanted)
-        if (!site.find_loop(w)) {
-          std::string names;
-          for (const auto& l : site.loops) names += (names.empty() ? "" : ", ") + l.name;
-          throw UsageError("--loops: no loop '" + w + "' in " + a->config +
-                           "; its loops: " + names);
-        }
+      std::vector<std::string> names;
+      for (const auto& l : site.loops) names.push_back(l.name);
+      check_selection(wanted, names, a->config);
       for (const auto& l : site.loops)
-        if (wanted.empty() || std::find(wanted.begin(), wanted.end(), l.name) != wanted.end())
-          jobs.push_back({l.name, "", OpRange{l.op_min, l.op_max}});
+        if (selected(wanted, l.name)) jobs.push_back({l.name, "", OpRange{l.op_min, l.op_max}, ""});
     } else {
-      std::set<std::string> seen;
-      for (const auto& f : a->files) {
-        std::string name = fs::path(f).stem().string();
-        for (int k = 2; seen.count(name); ++k)
-          name = fs::path(f).stem().string() + "#" + std::to_string(k);
-        seen.insert(name);
-        jobs.push_back({name, f, file_range});
+      std::vector<std::string> names;
+      for (auto& j : file_jobs(a->files, file_range)) {
+        names.push_back(j.name);
+        if (selected(wanted, j.name)) jobs.push_back(std::move(j));
       }
+      check_selection(wanted, names, "the data files");
     }
     std::sort(jobs.begin(), jobs.end(),
               [](const auto& x, const auto& y) { return x.name < y.name; });

@@ -141,6 +141,7 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
     m.mv = c.mv_column;
     m.t = c.t_column;
     m.sample_period = c.sample_period;
+    m.require_pv = d.require_pv;
     return read_mat_loop_isolated(d.data, d.loop, m, &notes);
   }
   d.csv.decimal = d.decimal[0];

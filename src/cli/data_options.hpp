@@ -22,6 +22,8 @@ struct DataOptions {
   std::string decimal = ".";
   std::string db, loop, from, to;  // a recorded loop (valvediag record) instead of a file;
                                    // loop also names the loop inside a .mat file
+  // False: a .mat loop without PV is read with pv empty (a sweep gives its OP figures).
+  bool require_pv = true;
 };
 
 // Adds the positional DATA, --db/--loop/--from/--to and the CSV layout options (group "Input").

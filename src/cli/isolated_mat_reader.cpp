@@ -165,6 +165,11 @@ MatFileInfo list_mat_loops_isolated(const std::string& path, double timeout_s) {
       w.u64((l.has_op ? 1u : 0u) | (l.has_pv ? 2u : 0u) | (l.has_sp ? 4u : 0u) |
             (l.has_mv ? 8u : 0u));
       w.strings(l.fields);
+      w.u64(l.scalars.size());
+      for (const auto& [name, value] : l.scalars) {
+        w.str(name);
+        w.f64(value);
+      }
     }
     return w.out;
   });
@@ -187,6 +192,11 @@ MatFileInfo list_mat_loops_isolated(const std::string& path, double timeout_s) {
     l.has_sp = flags & 4u;
     l.has_mv = flags & 8u;
     l.fields = in.strings();
+    const std::uint64_t scalars = in.u64();
+    for (std::uint64_t k = 0; k < scalars; ++k) {
+      std::string name = in.str();
+      l.scalars.emplace_back(std::move(name), in.f64());
+    }
     info.loops.push_back(std::move(l));
   }
   return info;

@@ -540,7 +540,10 @@ MatFileInfo list_mat_loops(const std::string& path) {
       l.samples = f.matrix->dims[0];
       l.columns = f.matrix->dims[1];
     } else {
-      for (const auto& fl : f.fields) l.fields.push_back(fl.first);
+      for (const auto& fl : f.fields) {
+        l.fields.push_back(fl.first);
+        if (const auto x = scalar(fl.second)) l.scalars.emplace_back(fl.first, *x);
+      }
       auto present = [&](const char* name) {
         const matvar_t* v = field(f.fields, name);
         return v != nullptr && is_real_numeric(v) && element_count(v) > 0;

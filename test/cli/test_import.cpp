@@ -2,8 +2,10 @@
 // stiction database benchmark, the Tennessee Eastman matrix and .mat files written here.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -69,6 +71,8 @@ TEST_CASE("import lists the loops of the stiction database benchmark") {
   CHECK(has(l23, " 1500 "));
   CHECK(has(l23, " 10 "));
   CHECK(has(l23, "OP  (no PV)"));
+  CHECK(has(l23, "oscillation 1"));  // the database's label, listed as it is
+  CHECK(has(line_with(r.out, "benchmark.chemicals.loop16 "), "Type 1"));
   CHECK(has(r.out, "no loop has PV"));
 
   SUBCASE("a loop without PV: a clear message, exit status 2") {
@@ -163,6 +167,54 @@ TEST_CASE("import a loop of a .mat file to CSV, to a recording, or fit the .mat 
     CHECK(garbage.status == 2);
     CHECK(has(garbage.out, "not a MATLAB v5/v7/v7.3 MAT-file"));
   }
+}
+
+TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only loops") {
+  const std::string mat = tmp("sweep-runs.mat");
+  valvediag::test::write_runs_file(mat, MAT_FT_MAT5, MAT_COMPRESSION_NONE, 1500);
+  const std::string out = tmp("sweep-mat.json");
+  fs::remove(out);
+  const CliResult r = run({"sweep", mat, kBenchmark, "--loops", "runs(*),benchmark.power.*",
+                           "--jobs", "2", "--json", out});
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  CHECK(has(r.out, "sweep: 7 loop(s)"));
+  std::ifstream f(out);
+  const auto j = nlohmann::json::parse(f);
+  std::vector<std::string> names;
+  for (const auto& l : j["loops"]) {
+    const std::string name = l["loop"];
+    names.push_back(name);
+    CAPTURE(name);
+    CHECK(l["verdict"] != "error");
+    if (name.starts_with("runs(")) {
+      // OP and PV: diagnosed like any loop (the valve sticks 2 %).
+      CHECK(l["verdict"] != "not-enough-data");
+      CHECK(l["health"]["signal"] == "sp-pv");
+      CHECK(l["source"] == mat + ":" + name);
+    } else {
+      // OP only: no model, but OP's figures; the reason says what is missing.
+      CHECK(l["verdict"] == "not-enough-data");
+      CHECK(has(l["reason"].get<std::string>(), "no PV in the record"));
+      CHECK(l["health"]["signal"] == "op");
+      CHECK(l["health"]["op_travel_percent_per_hour"].get<double>() > 100);
+      if (name == "benchmark.power.loop1") {  // labelled oscillating in the database
+        CHECK(l["health"]["oscillating"] == true);
+        CHECK(l["health"]["period_s"].get<double>() == doctest::Approx(113).epsilon(0.05));
+      }
+    }
+  }
+  std::sort(names.begin(), names.end());
+  CHECK(names == std::vector<std::string>{"benchmark.power.loop1", "benchmark.power.loop2",
+                                          "benchmark.power.loop3", "benchmark.power.loop4",
+                                          "benchmark.power.loop5", "runs(1)", "runs(2)"});
+
+  // A name or pattern that selects nothing is a typo: said before any loop runs.
+  const CliResult typo = run({"sweep", mat, "--loops", "runs(*),benchmark.metal.*"});
+  CHECK(typo.status == 2);
+  CHECK(has(typo.out,
+            "--loops: no loop 'benchmark.metal.*' in the data files; its loops: "
+            "runs(1), runs(2)"));
 }
 
 TEST_CASE("Tennessee Eastman m1d14: the cooling-water loop named by matrix columns") {

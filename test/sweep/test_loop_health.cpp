@@ -3,9 +3,12 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <random>
 
 #include "valvediag/loop_health.hpp"
+#include "valvediag/mat_reader.hpp"
 
 using namespace valvediag;
 
@@ -117,8 +120,66 @@ TEST_CASE("unusable records are named with what is wrong") {
   for (std::size_t k = 0; k < ramp.size(); ++k) ramp.op[k] = 20 + 0.03 * static_cast<double>(k);
   CHECK(unusable_reason(ramp, loop_health(ramp)).find("OP reverses 0 times") == 0);
 
+  LoopData op_only = good;  // a .mat loop of OP alone (the stiction database's benchmark)
+  op_only.pv.clear();
+  op_only.sp.clear();
+  CHECK(unusable_reason(op_only, loop_health(op_only)).find("no PV in the record") == 0);
+
   LoopData pinned = good;
   for (std::size_t k = 0; k < pinned.size(); ++k)
     pinned.op[k] = k % 100 < 2 ? 99.0 + (k % 2) : 100.0;
   CHECK(unusable_reason(pinned, loop_health(pinned)).find("OP sits at its limits") == 0);
+}
+
+TEST_CASE("an OP-only record: OP's own oscillation and figures, no PV needed") {
+  LoopData d = make(2000, 1.0);
+  d.pv.clear();
+  d.sp.clear();
+  for (std::size_t k = 0; k < d.size(); ++k)
+    d.op[k] = 50 + 8 * std::sin(2 * M_PI * d.t[k] / 80.0);  // an 80 s cycle passed on to OP
+  const LoopHealth h = loop_health(d);
+  CHECK(h.signal == "op");
+  CHECK(h.oscillating);
+  CHECK(h.period_s == doctest::Approx(80.0).epsilon(0.05));
+  CHECK(h.amplitude == doctest::Approx(8.0).epsilon(0.02));
+  // 25 cycles, two reversals each; 4 x 8 % of travel per cycle.
+  CHECK(h.op_reversals_per_hour * h.duration_s / 3600.0 == doctest::Approx(49).epsilon(0.05));
+  CHECK(h.op_travel_percent_per_hour == doctest::Approx(32.0 * 3600.0 / 80.0).epsilon(0.05));
+}
+
+// The OP-only figures on real loops: the stiction database benchmark (shared/data/benchmark.mat,
+// 93 industrial loops of OP alone) carries each loop's `oscillation` label from its curators.
+// The detector (Thornhill's regularity of the ACF zero crossings, on OP about its mean) against
+// those labels; the table is printed, the floor holds what was measured.
+TEST_CASE("OP oscillation against the stiction database's oscillation labels") {
+  const std::string path = std::string(VALVEDIAG_DATA_DIR) + "/benchmark.mat";
+  REQUIRE(std::filesystem::exists(path));
+  const MatFileInfo info = list_mat_loops(path);
+  int table[2][2] = {{0, 0}, {0, 0}};  // [label][detected]
+  int labelled = 0;
+  MatOptions o;
+  o.require_pv = false;
+  for (const auto& l : info.loops) {
+    double label = -1;
+    for (const auto& [name, value] : l.scalars)
+      if (name == "oscillation") label = value;
+    if (label != 0 && label != 1) continue;
+    const LoopData d = read_mat_loop(path, l.path, o);
+    const LoopHealth h = loop_health(d);
+    CHECK(h.signal == "op");
+    ++table[label == 1][h.oscillating];
+    ++labelled;
+    if (label == 1 && h.oscillating) CHECK(h.period_s > 2 * d.sample_period());
+  }
+  std::printf(
+      "benchmark.mat, OP oscillation vs label (%d loops)\n"
+      "  label \\ detected   oscillating  not\n"
+      "  oscillating        %11d  %3d\n"
+      "  not                %11d  %3d\n",
+      labelled, table[1][1], table[1][0], table[0][1], table[0][0]);
+  CHECK(labelled == 92);  // chemicals.loop16 carries a `Type` field instead of the label
+  // Measured: 35 of 66 labelled oscillating found, none of the 26 others called oscillating.
+  // Thornhill's regularity test is strict by design (an irregular cycle is not called one).
+  CHECK(table[0][1] <= 1);
+  CHECK(table[1][1] >= 33);
 }
