@@ -314,20 +314,20 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   const auto [op_min, op_max] = std::minmax_element(op.begin(), op.end());
   const auto [mv_min, mv_max] = std::minmax_element(mv.begin(), mv.end());
   const double op_span = *op_max - *op_min, mv_span = *mv_max - *mv_min;
-  const double op_range = quantile(op, 0.95) - quantile(op, 0.05);
+  const double op_sweep = quantile(op, 0.95) - quantile(op, 0.05);  // OP's 5..95 % spread
   v.mv_noise = step_noise_sigma(mv);
   v.tested = true;
 
   // A valve that stays put while OP sweeps far beyond MV's noise: stuck, or a dead transmitter.
   if (mv_span <= std::max(6.0 * v.mv_noise, 0.002 * width) &&
-      op_range >= std::max(opt.stuck_op_noise * v.mv_noise, 0.02 * width)) {
+      op_sweep >= std::max(opt.stuck_op_noise * v.mv_noise, 0.02 * width)) {
     v.decided = true;
     v.verdict = "stiction";
     v.summary = strprintf(
         "the valve position stays within %.2f %% of travel while OP sweeps %.1f %%: "
         "the valve is stuck (or its position transmitter is dead; check it before "
         "the valve)",
-        mv_span * to_pct, op_range * to_pct);
+        mv_span * to_pct, op_sweep * to_pct);
     return v;
   }
   if (op_span <= 0.0) {
