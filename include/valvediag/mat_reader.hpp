@@ -37,7 +37,8 @@ struct MatLoopInfo {
   std::optional<double> ts;  // the Ts field when it is a positive finite scalar
   bool has_op = false, has_pv = false, has_sp = false, has_mv = false;
   std::vector<std::string> fields;  // loop struct: all its field names, in file order
-  // Loop struct: its numeric scalar fields (Ts, a database's labels such as `oscillation`).
+  // Loop struct: its numeric scalar fields other than Ts (which is `ts`): a database's labels
+  // such as `oscillation`.
   std::vector<std::pair<std::string, double>> scalars;
 };
 

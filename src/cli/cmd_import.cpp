@@ -1,6 +1,5 @@
 // valvediag import: loops of a MATLAB .mat file listed, written as CSV, or stored in a recording
 // database as a recorded loop.
-#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <iomanip>
@@ -88,11 +87,8 @@ void list(const ImportArgs& a) {
         if (has) s += (s.empty() ? "" : " ") + std::string(n);
       if (!l.has_pv) s += "  (no PV)";
       if (!l.ts) s += "  (no Ts)";
-      // Other numeric scalars are a database's labels (the benchmark's `oscillation`).
-      for (const auto& [name, value] : l.scalars)
-        if (name.size() != 2 || std::tolower(static_cast<unsigned char>(name[0])) != 't' ||
-            std::tolower(static_cast<unsigned char>(name[1])) != 's')
-          s += "  " + name + " " + strprintf("%g", value);
+      for (const auto& [name, value] : l.scalars)  // a database's labels (`oscillation`)
+        s += "  " + name + " " + strprintf("%g", value);
       std::cout << s;
     }
     std::cout << "\n";

@@ -542,7 +542,8 @@ MatFileInfo list_mat_loops(const std::string& path) {
     } else {
       for (const auto& fl : f.fields) {
         l.fields.push_back(fl.first);
-        if (const auto x = scalar(fl.second)) l.scalars.emplace_back(fl.first, *x);
+        if (const auto x = scalar(fl.second); x && lower(fl.first) != "ts")
+          l.scalars.emplace_back(fl.first, *x);
       }
       auto present = [&](const char* name) {
         const matvar_t* v = field(f.fields, name);
