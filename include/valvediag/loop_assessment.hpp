@@ -72,7 +72,8 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
 
 // Severity from verdict, stiction size and oscillation: stiction 6, deadband 5,
 // other-nonlinearity 3, no-valve-problem 1, not-enough-data 0, error -1; + 1 when the loop
-// oscillates; + the stiction band in % of travel / 2, at most 3.
+// oscillates (an unjudged loop too: in an OP-only sweep the cycling valves come first); + the
+// stiction band in % of travel / 2, at most 3.
 double severity(const LoopAssessment& a);
 
 // Highest severity first; ties by stiction size, then name.

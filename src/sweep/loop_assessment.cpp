@@ -90,9 +90,7 @@ double severity(const LoopAssessment& a) {
     s = 3;
   else if (a.verdict == "no-valve-problem")
     s = 1;
-  else if (a.verdict == "not-enough-data")
-    return 0;
-  else
+  else if (a.verdict != "not-enough-data")  // not-enough-data 0: its oscillation still counts
     return -1;
   if (a.health.oscillating) s += 1;
   if (std::isfinite(a.stiction_percent)) s += std::clamp(a.stiction_percent / 2.0, 0.0, 3.0);

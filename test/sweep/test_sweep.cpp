@@ -71,6 +71,19 @@ TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean 
   CHECK(i.verdict == "not-enough-data");
   CHECK(i.reason.find("OP does not move") == 0);
   CHECK(i.severity == 0.0);
+
+  // OP alone (a .mat benchmark loop): not judged, but a cycling valve ranks above an idle one.
+  LoopData op_only = sticky;
+  op_only.pv.clear();
+  op_only.sp.clear();
+  const LoopAssessment o = assess_loop(op_only, "FIC104");
+  CHECK(o.verdict == "not-enough-data");
+  CHECK(o.reason.find("no PV in the record") == 0);
+  CHECK(o.health.oscillating);
+  CHECK(o.severity == 1.0);
+  std::vector<LoopAssessment> v{i, o};
+  rank(v);
+  CHECK(v.front().loop == "FIC104");
 }
 
 TEST_CASE("results survive their JSON round trip; rank puts the worst valve first") {
