@@ -16,6 +16,7 @@
 #include "valvediag/gnuplot.hpp"
 #include "valvediag/identification.hpp"
 #include "valvediag/loop_data.hpp"
+#include "valvediag/loop_health.hpp"
 #include "valvediag/model_fit.hpp"
 #include "valvediag/model_history.hpp"
 #include "valvediag/residual_analysis.hpp"
@@ -53,6 +54,23 @@ struct HtmlReport {
 // Throws std::invalid_argument when data or fit is missing or their lengths differ, and
 // GnuplotMissing (see require_plots).
 HtmlReport html_report(const ReportContent& content, const ReportOptions& opt = {});
+
+// A page for a record no model was fitted to (a sweep's not-enough-data loop): why, the
+// loop-health figures and the trend of what was recorded (OP alone when PV is missing), so the
+// engineer sees what the data lacks without opening the file.
+struct DataPageContent {
+  const LoopData* data = nullptr;       // required: t, op (pv, sp, mv when present)
+  std::string data_name;                // as shown
+  std::string verdict;                  // e.g. not-enough-data
+  std::string reason;                   // why there is no model
+  const LoopHealth* health = nullptr;   // nullptr: not shown
+  std::vector<std::string> notes;       // shown under the header (data notes)
+  std::string generated;                // date shown; empty: now (UTC)
+  std::string generator = "valvediag";  // program and version in the footer
+};
+// Throws std::invalid_argument when data is missing or its lengths differ, and GnuplotMissing
+// (see require_plots).
+HtmlReport html_data_page(const DataPageContent& content, const ReportOptions& opt = {});
 
 // A Preisach identification (identify()) in the shape of a composable model fit, so the report
 // takes both: spec `preisach`, the ARX part, x_hat and the simulated output on u, y.

@@ -10,12 +10,13 @@ namespace valvediag {
 struct LoopData {
   std::vector<double> t;   // seconds, strictly increasing
   std::vector<double> op;  // controller output u, % (input of the valve)
-  std::vector<double> pv;  // process variable y
+  std::vector<double> pv;  // process variable y (empty: OP alone, as in a benchmark .mat loop)
   std::vector<double> sp;  // set point (empty when not available)
   std::vector<double> mv;  // measured valve position x (empty when not available)
   std::string source;      // where the data came from (file name, scenario), for messages
 
   std::size_t size() const { return t.size(); }
+  bool has_pv() const { return !pv.empty(); }
   bool has_sp() const { return !sp.empty(); }
   bool has_mv() const { return !mv.empty(); }
   // Sample period from the first two time stamps (0 when fewer than two samples).

@@ -124,7 +124,7 @@ MatOptions mat_options(const ImportArgs& a, bool require_pv) {
 
 // Writes t, op, pv (and sp, mv); a loop without PV as t, op (and sp, mv).
 void write_csv(const std::string& out, const LoopData& d) {
-  if (!d.pv.empty()) {
+  if (d.has_pv()) {
     write_loop_csv(out, d);
     return;
   }
@@ -144,7 +144,7 @@ void write_csv(const std::string& out, const LoopData& d) {
 std::string wrote(const std::string& out, const LoopData& d, const std::string& path) {
   std::string s = "wrote " + out + ": " + std::to_string(d.size()) + " samples of loop " + path +
                   " (Ts " + seconds(d.sample_period()) + " s)";
-  if (d.pv.empty()) s += "; no PV in the file: t, op only (fit and diagnose need a pv column)";
+  if (!d.has_pv()) s += "; no PV in the file: t, op only (fit and diagnose need a pv column)";
   return s;
 }
 

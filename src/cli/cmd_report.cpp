@@ -32,7 +32,10 @@ void check_report_writable(const std::string& path) {
 
 ReportFile write_report_file(const std::string& path, const ReportContent& content,
                              const ReportOptions& opt) {
-  const HtmlReport rep = html_report(content, opt);
+  return write_page_file(path, html_report(content, opt));
+}
+
+ReportFile write_page_file(const std::string& path, const HtmlReport& rep) {
   const std::string partial = path + ".partial";
   {
     std::ofstream f(partial, std::ios::binary);

@@ -132,25 +132,39 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   }
   Diagnosis dg;
   LoopAssessment r = assess_loop(d, job.name, opt, &dg);
-  if (!a.reports.empty() && !dg.steps.empty()) {
-    // The loop's page: the climbed ladder's top model, where it fails, the findings.
+  if (!a.reports.empty() && (!dg.steps.empty() || d.size() >= 2)) {
+    // The loop's page: the climbed ladder's top model, where it fails, the findings; without a
+    // model (not-enough-data), why, the loop-health figures and the trend.
     const fs::path path = fs::path(a.reports) / (job.name + ".html");
-    std::vector<HistoryEntry> ladder;
-    for (const auto& s : dg.steps) ladder.push_back(history_entry(s.fit, "sweep"));
-    ReportContent c;
-    c.data = &d;
-    c.data_name = job.file.empty() ? a.db + ", loop " + job.name : job.file;
-    c.fit = &dg.last().fit;
-    c.where = &dg.last().residual;
-    c.diagnosis = &dg;
-    c.diagnosis_command = "valvediag sweep (diagnose --auto from linear)";
-    c.ladder = ladder;
-    c.notes = notes;
-    c.generator = "valvediag sweep";
+    const std::string shown = job.file.empty() ? a.db + ", loop " + job.name : job.file;
     ReportOptions ro;
     ro.require_plots = false;  // without gnuplot the page says so in place of each plot
     try {
-      write_report_file(path.string(), c, ro);
+      if (!dg.steps.empty()) {
+        std::vector<HistoryEntry> ladder;
+        for (const auto& s : dg.steps) ladder.push_back(history_entry(s.fit, "sweep"));
+        ReportContent c;
+        c.data = &d;
+        c.data_name = shown;
+        c.fit = &dg.last().fit;
+        c.where = &dg.last().residual;
+        c.diagnosis = &dg;
+        c.diagnosis_command = "valvediag sweep (diagnose --auto from linear)";
+        c.ladder = ladder;
+        c.notes = notes;
+        c.generator = "valvediag sweep";
+        write_report_file(path.string(), c, ro);
+      } else {
+        DataPageContent c;
+        c.data = &d;
+        c.data_name = shown;
+        c.verdict = r.verdict;
+        c.reason = r.error.empty() ? r.reason : r.error;
+        c.health = &r.health;
+        c.notes = notes;
+        c.generator = "valvediag sweep";
+        write_page_file(path.string(), html_data_page(c, ro));
+      }
       r.report = path.string();
     } catch (const std::exception& e) {
       r.error = std::string("report not written: ") + e.what();

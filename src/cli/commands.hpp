@@ -58,6 +58,8 @@ struct ReportFile {
 };
 ReportFile write_report_file(const std::string& path, const ReportContent& content,
                              const ReportOptions& opt);
+// Any page (html_report, html_data_page) written the same way.
+ReportFile write_page_file(const std::string& path, const HtmlReport& rep);
 std::string report_file_summary(const std::string& path, const ReportFile& r);
 
 }  // namespace valvediag::cli

@@ -601,7 +601,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
     if (!o.pv.empty() && !none(o.pv)) d.pv = column(o.pv, "pv");
     if (!o.sp.empty() && !none(o.sp)) d.sp = column(o.sp, "sp");
     if (!o.mv.empty() && !none(o.mv)) d.mv = column(o.mv, "mv");
-    if (d.pv.empty() && o.require_pv)
+    if (!d.has_pv() && o.require_pv)
       throw fail("no pv column given; name it by number (--pv N, 1 to " + std::to_string(cols) +
                  ")");
     const bool time_column = !o.t.empty() && !none(o.t) && lower(o.t) != "t";
@@ -630,7 +630,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
       for (std::size_t i = 0; i < rows; ++i) d.t[i] = static_cast<double>(i) * *period;
     }
     note("read " + where + " (" + shape + "): op column " + o.op +
-         (d.pv.empty() ? "" : ", pv column " + o.pv) + (d.sp.empty() ? "" : ", sp column " + o.sp) +
+         (d.has_pv() ? ", pv column " + o.pv : "") + (d.sp.empty() ? "" : ", sp column " + o.sp) +
          (d.mv.empty() ? "" : ", mv column " + o.mv) +
          (time_column ? ", t column " + o.t : ", Ts " + num6g(*period) + " s"));
   } else {
@@ -678,11 +678,11 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
     d.t.resize(d.op.size());
     for (std::size_t i = 0; i < d.t.size(); ++i) d.t[i] = static_cast<double>(i) * P;
     std::string used = "op";
-    if (!d.pv.empty()) used += ", pv";
+    if (d.has_pv()) used += ", pv";
     if (!d.sp.empty()) used += ", sp";
     if (!d.mv.empty()) used += ", mv";
     note("read " + where + ": " + used + ", Ts " + num6g(P) + " s" + (ts ? "" : " (given)") +
-         (d.pv.empty() ? "; no PV field" : ""));
+         (!d.has_pv() ? "; no PV field" : ""));
   }
   // Aligned, finite series of at least two samples.
   auto check = [&](const std::vector<double>& v, const char* name) {

@@ -376,29 +376,34 @@ struct PlotJob {
   std::string missing;  // why it is not drawn
 };
 
-PlotJob trends_plot(const ReportContent& c, std::size_t buckets) {
-  const LoopData& d = *c.data;
-  Plot p(960, 460);
+PlotJob trends_plot(const LoopData& d, std::size_t buckets) {
+  Plot p(960, d.has_pv() ? 460 : 260);
   const std::size_t n = d.size();
-  const std::string pv = p.series(d.t, d.pv, 0, n, buckets);
-  const std::string sp = d.has_sp() ? p.series(d.t, d.sp, 0, n, buckets) : "";
+  const std::string pv = d.has_pv() ? p.series(d.t, d.pv, 0, n, buckets) : "";
+  const std::string sp = d.has_pv() && d.has_sp() ? p.series(d.t, d.sp, 0, n, buckets) : "";
   const std::string op = p.series(d.t, d.op, 0, n, buckets);
   const std::string mv = d.has_mv() ? p.series(d.t, d.mv, 0, n, buckets) : "";
   auto& o = p.out();
-  o << "set multiplot layout 2,1\n"
-       "set lmargin 10\nset rmargin 3\nset format x ''\nset ylabel 'PV'\n";
-  o << "plot " << pv << " with lines lw 1.2 lc rgb '#1f5fa8' title 'PV'";
-  if (!sp.empty()) o << ", " << sp << " with lines lw 1.2 dt 2 lc rgb '#2e8b57' title 'SP'";
-  o << "\nset format x '%g'\nset xlabel 't (s)'\nset ylabel 'OP (%)'\n";
+  o << "set lmargin 10\nset rmargin 3\n";
+  if (!pv.empty()) {
+    o << "set multiplot layout 2,1\nset format x ''\nset ylabel 'PV'\n";
+    o << "plot " << pv << " with lines lw 1.2 lc rgb '#1f5fa8' title 'PV'";
+    if (!sp.empty()) o << ", " << sp << " with lines lw 1.2 dt 2 lc rgb '#2e8b57' title 'SP'";
+    o << "\n";
+  }
+  o << "set format x '%g'\nset xlabel 't (s)'\nset ylabel 'OP (%)'\n";
   o << "plot " << op << " with lines lw 1.2 lc rgb '#c05010' title 'OP'";
   if (!mv.empty())
     o << ", " << mv << " with lines lw 1.2 lc rgb '#7a3fa0' title 'valve position (MV)'";
-  o << "\nunset multiplot\n";
-  return {"plot-trends", "Trends: OP, PV and SP",
-          d.has_sp() ? "Process variable with its set point (top) and controller output (bottom)."
-                     : "Process variable (top) and controller output (bottom); the data has no "
-                       "set point.",
-          p.script(), ""};
+  o << "\n";
+  if (!pv.empty()) o << "unset multiplot\n";
+  const char* caption =
+      !d.has_pv()  ? "Controller output; PV was not recorded."
+      : d.has_sp() ? "Process variable with its set point (top) and controller output (bottom)."
+                   : "Process variable (top) and controller output (bottom); the data has no "
+                     "set point.";
+  return {"plot-trends", d.has_pv() ? "Trends: OP, PV and SP" : "Trend: OP", caption, p.script(),
+          ""};
 }
 
 PlotJob fit_plot(const ReportContent& c, std::size_t buckets) {
@@ -916,6 +921,94 @@ std::string gnuplot_version(const std::string& svg) {
   return v;
 }
 
+// The plots of a page, each drawn by its own gnuplot, run concurrently (each takes a fraction of
+// a second). svg[i] is empty for a plot not drawn: its job's `missing` says why, else
+// `not_drawn` (gnuplot missing, or plots left out) does.
+struct DrawnPlots {
+  std::vector<std::string> svg;
+  std::string not_drawn;
+  std::string gnuplot_version;
+};
+
+DrawnPlots draw(std::vector<PlotJob>& jobs, const ReportOptions& opt, HtmlReport& rep) {
+  DrawnPlots d;
+  d.svg.resize(jobs.size());
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!opt.plots) {
+    d.not_drawn = "Plots left out (--no-plots).";
+  } else {
+    std::vector<std::future<std::string>> runs;
+    for (const auto& j : jobs)
+      runs.push_back(std::async(std::launch::async, [&opt, script = j.script] {
+        return script.empty() ? std::string() : gnuplot_run(script, opt.gnuplot);
+      }));
+    std::exception_ptr missing;
+    for (std::size_t i = 0; i < jobs.size(); ++i) {
+      try {
+        d.svg[i] = runs[i].get();
+      } catch (const GnuplotMissing& ex) {
+        if (!missing) missing = std::current_exception();
+        d.not_drawn = ex.what();
+      } catch (const GnuplotError& ex) {
+        rep.warnings.push_back(jobs[i].id + ": " + ex.what());
+        jobs[i].missing = std::string("This plot could not be drawn: ") + ex.what();
+      }
+    }
+    if (missing) {
+      if (opt.require_plots) std::rethrow_exception(missing);
+      for (auto& s : d.svg) s.clear();
+      rep.warnings.push_back(d.not_drawn);
+    }
+  }
+  rep.plot_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  for (const auto& s : d.svg)
+    if (d.gnuplot_version.empty() && !s.empty()) d.gnuplot_version = gnuplot_version(s);
+  return d;
+}
+
+void figure(std::ostringstream& o, const PlotJob& j, const DrawnPlots& d, std::size_t i,
+            HtmlReport& rep) {
+  o << "<figure id=\"" << j.id << "\" class=\"plot\">\n<figcaption>" << e(j.title)
+    << "</figcaption>\n";
+  if (!d.svg[i].empty()) {
+    o << inline_svg(d.svg[i], j.id) << "\n";
+    if (!j.caption.empty()) o << "<p class=\"caption\">" << e(j.caption) << "</p>\n";
+    rep.plots.push_back(j.id);
+  } else {
+    const std::string why = !j.missing.empty()     ? j.missing
+                            : !d.not_drawn.empty() ? d.not_drawn
+                                                   : std::string("Not drawn.");
+    o << "<p class=\"note\">" << e(why) << "</p>\n";
+  }
+  o << "</figure>\n";
+}
+
+void page_head(std::ostringstream& o, const std::string& data_name) {
+  o << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+    << "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
+    << "<title>valvediag report: " << e(data_name) << "</title>\n<style>" << kStyle
+    << "</style>\n</head>\n<body>\n";
+  o << "<h1>Control valve report: " << e(data_name) << "</h1>\n";
+}
+
+void page_foot(std::ostringstream& o, const std::string& generator, const std::string& generated,
+               const DrawnPlots& d) {
+  o << "<footer>Written by " << e(generator) << " on " << e(generated)
+    << (d.gnuplot_version.empty() ? std::string()
+                                  : "; plots by " + e(d.gnuplot_version) + " (SVG terminal)")
+    << ". One self-contained file: no scripts, no external resources.</footer>\n";
+  o << "</body>\n</html>\n";
+}
+
+// "1 h 20 min", "12 min", "45 s": a record's length as people say it.
+std::string duration_text(double s) {
+  if (!(s >= 0)) return "n/a";
+  if (s < 120) return num(s, 0) + " s";
+  const long m = std::lround(s / 60.0);
+  if (m < 120) return std::to_string(m) + " min";
+  return std::to_string(m / 60) + " h " + std::to_string(m % 60) + " min";
+}
+
 }  // namespace
 
 HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
@@ -931,7 +1024,7 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
   ReportContent content = c;
   if (content.generated.empty()) content.generated = utc_timestamp();
 
-  std::vector<PlotJob> jobs{trends_plot(content, opt.buckets),
+  std::vector<PlotJob> jobs{trends_plot(d, opt.buckets),
                             fit_plot(content, opt.buckets),
                             residual_plot(content, opt.buckets),
                             signature_plot(content),
@@ -940,87 +1033,90 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
                             step_plot(content),
                             ladder_plot(content)};
   HtmlReport rep;
-  std::vector<std::string> svg(jobs.size());
-  std::string not_drawn;  // why no plot is drawn at all
-  const auto t0 = std::chrono::steady_clock::now();
-  if (!opt.plots) {
-    not_drawn = "Plots left out (--no-plots).";
-  } else {
-    // One gnuplot per plot, run concurrently (each takes a fraction of a second).
-    std::vector<std::future<std::string>> runs;
-    for (const auto& j : jobs)
-      runs.push_back(std::async(std::launch::async, [&opt, script = j.script] {
-        return script.empty() ? std::string() : gnuplot_run(script, opt.gnuplot);
-      }));
-    std::exception_ptr missing;
-    for (std::size_t i = 0; i < jobs.size(); ++i) {
-      try {
-        svg[i] = runs[i].get();
-      } catch (const GnuplotMissing& ex) {
-        if (!missing) missing = std::current_exception();
-        not_drawn = ex.what();
-      } catch (const GnuplotError& ex) {
-        rep.warnings.push_back(jobs[i].id + ": " + ex.what());
-        jobs[i].missing = std::string("This plot could not be drawn: ") + ex.what();
-      }
-    }
-    if (missing) {
-      if (opt.require_plots) std::rethrow_exception(missing);
-      for (auto& s : svg) s.clear();
-      rep.warnings.push_back(not_drawn);
-    }
-  }
-  rep.plot_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::string gp_version;
-  for (const auto& s : svg)
-    if (gp_version.empty() && !s.empty()) gp_version = gnuplot_version(s);
-
-  auto figure = [&](std::ostringstream& o, std::size_t i) {
-    const PlotJob& j = jobs[i];
-    o << "<figure id=\"" << j.id << "\" class=\"plot\">\n<figcaption>" << e(j.title)
-      << "</figcaption>\n";
-    if (!svg[i].empty()) {
-      o << inline_svg(svg[i], j.id) << "\n";
-      if (!j.caption.empty()) o << "<p class=\"caption\">" << e(j.caption) << "</p>\n";
-      rep.plots.push_back(j.id);
-    } else {
-      const std::string why = !j.missing.empty()   ? j.missing
-                              : !not_drawn.empty() ? not_drawn
-                                                   : std::string("Not drawn.");
-      o << "<p class=\"note\">" << e(why) << "</p>\n";
-    }
-    o << "</figure>\n";
-  };
+  const DrawnPlots drawn = draw(jobs, opt, rep);
+  auto fig = [&](std::ostringstream& o, std::size_t i) { figure(o, jobs[i], drawn, i, rep); };
 
   std::ostringstream o;
-  o << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-    << "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
-    << "<title>valvediag report: " << e(content.data_name) << "</title>\n<style>" << kStyle
-    << "</style>\n</head>\n<body>\n";
-  o << "<h1>Control valve report: " << e(content.data_name) << "</h1>\n";
+  page_head(o, content.data_name);
   header_section(o, content);
   o << "<section id=\"plots-data\">\n<h2>The data and the fit</h2>\n";
-  figure(o, 0);
-  figure(o, 1);
-  figure(o, 2);
+  fig(o, 0);
+  fig(o, 1);
+  fig(o, 2);
   o << "</section>\n<section id=\"plots-valve\">\n<h2>The valve</h2>\n<div class=\"pair\">\n";
-  figure(o, 3);
-  figure(o, 4);
+  fig(o, 3);
+  fig(o, 4);
   o << "</div>\n</section>\n<section id=\"plots-process\">\n<h2>The process (linear "
        "block)</h2>\n";
-  figure(o, 5);
-  figure(o, 6);
+  fig(o, 5);
+  fig(o, 6);
   o << "</section>\n";
   where_section(o, content);
   diagnosis_section(o, content);
   o << "<section id=\"plots-ladder\">\n<h2>Model ladder: the error as effects are added</h2>\n";
-  figure(o, 7);
+  fig(o, 7);
   o << "</section>\n";
   ladder_section(o, content);
-  o << "<footer>Written by " << e(content.generator) << " on " << e(content.generated)
-    << (gp_version.empty() ? std::string() : "; plots by " + e(gp_version) + " (SVG terminal)")
-    << ". One self-contained file: no scripts, no external resources.</footer>\n";
-  o << "</body>\n</html>\n";
+  page_foot(o, content.generator, content.generated, drawn);
+  rep.html = o.str();
+  return rep;
+}
+
+HtmlReport html_data_page(const DataPageContent& c, const ReportOptions& opt) {
+  if (c.data == nullptr) throw std::invalid_argument("html_data_page: data is required");
+  const LoopData& d = *c.data;
+  if (d.size() < 2 || d.op.size() != d.size() || (d.has_pv() && d.pv.size() != d.size()))
+    throw std::invalid_argument("html_data_page: the data needs t and op (and pv) of equal length");
+  const std::string generated = c.generated.empty() ? utc_timestamp() : c.generated;
+  std::vector<PlotJob> jobs{trends_plot(d, opt.buckets)};
+  HtmlReport rep;
+  const DrawnPlots drawn = draw(jobs, opt, rep);
+
+  std::ostringstream o;
+  page_head(o, c.data_name);
+  o << "<section id=\"summary\">\n<table class=\"header\">\n";
+  row(o, "data", e(c.data_name));
+  if (!d.source.empty() && d.source != c.data_name) row(o, "source", e(d.source));
+  row(o, "samples",
+      std::to_string(d.size()) + " (t " + e(num(d.t.front(), 1)) + " .. " + e(num(d.t.back(), 1)) +
+          " s, " + e(duration_text(d.t.back() - d.t.front())) + ")");
+  row(o, "sample period Ts", e(num(d.sample_period(), 3)) + " s");
+  row(o, "recorded",
+      std::string("OP") + (d.has_pv() ? ", PV" : "") + (d.has_sp() ? ", SP" : "") +
+          (d.has_mv() ? ", valve position (MV)" : ""));
+  row(o, "generated", e(generated));
+  row(o, "model", "none: " + e(c.reason));
+  row(o, "verdict", "<span class=\"verdict\">" + e(c.verdict) + "</span>");
+  o << "</table>\n";
+  for (const auto& n : c.notes) o << "<p class=\"note\">" << e(n) << "</p>\n";
+  o << "</section>\n";
+
+  if (c.health != nullptr) {
+    const LoopHealth& h = *c.health;
+    const std::string what = h.signal == "op"   ? "OP"
+                             : h.signal == "pv" ? "PV"
+                                                : "the control error SP - PV";
+    o << "<section id=\"health\">\n<h2>Loop health (no model needed)</h2>\n"
+         "<table class=\"header\">\n";
+    row(o, "oscillation",
+        h.oscillating
+            ? "yes, in " + e(what) + ": period " + e(num(h.period_s, 0)) + " s, amplitude " +
+                  e(num(h.amplitude, 3)) + ", regularity " + e(num(h.regularity, 2))
+        : h.period_s > 0 ? "no regular cycle in " + e(what) + " (period " + e(num(h.period_s, 0)) +
+                               " s, regularity " + e(num(h.regularity, 2)) + ", under 1)"
+                         : "none found in " + e(what));
+    row(o, "OP reversals",
+        e(num(h.op_reversals_per_hour, 1)) + " per hour (beyond the OP noise band " +
+            e(num(h.op_noise, 3)) + ")");
+    row(o, "OP travel", e(num(h.op_travel_percent_per_hour, 1)) + " % of the OP range per hour");
+    row(o, "OP span", e(num(h.op_span_percent, 1)) + " % of the OP range");
+    row(o, "time at OP limits", e(num(h.time_at_limits_percent, 1)) + " %");
+    o << "</table>\n</section>\n";
+  }
+  o << "<section id=\"plots-data\">\n<h2>The data</h2>\n";
+  figure(o, jobs[0], drawn, 0, rep);
+  o << "</section>\n";
+  page_foot(o, c.generator, generated, drawn);
   rep.html = o.str();
   return rep;
 }

@@ -40,6 +40,13 @@ bool has(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
 }
 
+std::string read_file(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
 // The line of `text` that holds `part`.
 std::string line_with(const std::string& text, const std::string& part) {
   std::istringstream s(text);
@@ -174,8 +181,11 @@ TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only
   valvediag::test::write_runs_file(mat, MAT_FT_MAT5, MAT_COMPRESSION_NONE, 1500);
   const std::string out = tmp("sweep-mat.json");
   fs::remove(out);
-  const CliResult r = run({"sweep", mat, kBenchmark, "--loops", "runs(*),benchmark.power.*",
-                           "--jobs", "2", "--json", out});
+  const fs::path pages = tmp("sweep-mat-pages");
+  fs::remove_all(pages);
+  const CliResult r =
+      run({"sweep", mat, kBenchmark, "--loops", "runs(*),benchmark.power.*", "--jobs", "2",
+           "--json", out, "--reports", pages.string(), "--html", (pages / "index.html").string()});
   INFO(r.out);
   REQUIRE(r.status == 0);
   CHECK(has(r.out, "sweep: 7 loop(s)"));
@@ -204,6 +214,23 @@ TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only
       }
     }
   }
+  // Every loop has its page: the model's, or (OP only) why there is none and OP's figures.
+  const std::string index = read_file(pages / "index.html");
+  for (const auto& name : names) {
+    CAPTURE(name);
+    CHECK(has(index, "href=\"" + name + ".html\""));
+    const std::string page = read_file(pages / (name + ".html"));
+    CHECK(has(page, "id=\"plot-trends\""));
+    if (name.starts_with("runs(")) {
+      CHECK(has(page, "id=\"plots-valve\""));
+    } else {
+      CHECK(has(page, "none: no PV in the record"));
+      CHECK(has(page, "id=\"health\""));
+      CHECK_FALSE(has(page, "id=\"plots-valve\""));
+    }
+  }
+  CHECK(has(read_file(pages / "benchmark.power.loop1.html"), "yes, in OP: period 11"));
+  fs::remove_all(pages);
   std::sort(names.begin(), names.end());
   CHECK(names == std::vector<std::string>{"benchmark.power.loop1", "benchmark.power.loop2",
                                           "benchmark.power.loop3", "benchmark.power.loop4",

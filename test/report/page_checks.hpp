@@ -23,6 +23,10 @@ inline bool has_plot(const std::string& html, const std::string& id) {
          f.find(" d='M") != std::string::npos;
 }
 
+inline bool has(const std::string& s, const std::string& what) {
+  return s.find(what) != std::string::npos;
+}
+
 inline std::size_t count(const std::string& s, const std::string& what) {
   std::size_t n = 0;
   for (auto p = s.find(what); p != std::string::npos; p = s.find(what, p + 1)) ++n;

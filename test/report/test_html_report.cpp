@@ -16,6 +16,7 @@ using namespace valvediag;
 using report_test::check_self_contained;
 using report_test::count;
 using report_test::figure;
+using report_test::has;
 using report_test::has_plot;
 
 TEST_CASE("html_escape: markup characters as entities, bad bytes replaced, UTF-8 kept") {
@@ -302,4 +303,56 @@ TEST_CASE("html_report refuses a fit that does not belong to the data") {
   CHECK_THROWS_AS(html_report(c), std::invalid_argument);
   c.fit = nullptr;
   CHECK_THROWS_AS(html_report(c), std::invalid_argument);
+}
+
+TEST_CASE("the page of a record without a model: why, the loop-health figures, OP's trend") {
+  LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 1500);
+  d.pv.clear();  // OP alone, as the stiction database's benchmark loops
+  d.sp.clear();
+  d.mv.clear();
+  LoopHealth h;
+  h.oscillating = true;
+  h.period_s = 118.4;
+  h.amplitude = 6.25;
+  h.regularity = 4.2;
+  h.signal = "op";
+  h.op_reversals_per_hour = 61;
+  h.op_noise = 0.05;
+  DataPageContent c;
+  c.data = &d;
+  c.data_name = "bench <mat> & loop";
+  c.verdict = "not-enough-data";
+  c.reason = "no PV in the record (OP only)";
+  c.health = &h;
+  c.notes = {"read <loop>"};
+  const HtmlReport r = html_data_page(c);
+  const std::string& p = r.html;
+  check_self_contained(p);
+  CHECK(r.warnings.empty());
+  CHECK(r.plots == std::vector<std::string>{"plot-trends"});
+  CHECK(has_plot(p, "plot-trends"));
+  CHECK(has(figure(p, "plot-trends"), "Trend: OP"));
+  CHECK(has(figure(p, "plot-trends"), "PV was not recorded"));
+  CHECK(has(figure(p, "plot-trends"), "<text>OP</text>"));
+  CHECK_FALSE(has(figure(p, "plot-trends"), "<text>PV</text>"));
+  CHECK(has(p, "<tr><th>recorded</th><td>OP</td></tr>"));
+  CHECK(has(p, "none: no PV in the record (OP only)"));
+  CHECK(has(p, "<span class=\"verdict\">not-enough-data</span>"));
+  CHECK(has(p, "yes, in OP: period 118 s, amplitude 6.250, regularity 4.20"));
+  CHECK(has(p, "61.0 per hour (beyond the OP noise band 0.050)"));
+  CHECK(has(p, "bench &lt;mat&gt; &amp; loop"));
+  CHECK(has(p, "read &lt;loop&gt;"));
+  CHECK_FALSE(has(p, "<mat>"));
+
+  // With PV: both panels; a PV of another length is refused, as is no data.
+  LoopData full = run_scenario(scenario_by_name("paper-ex1"), 1, 1500);
+  c.data = &full;
+  c.health = nullptr;
+  const std::string q = html_data_page(c).html;
+  CHECK(has(figure(q, "plot-trends"), "Trends: OP, PV and SP"));
+  CHECK_FALSE(has(q, "id=\"health\""));
+  full.pv.resize(10);
+  CHECK_THROWS_AS(html_data_page(c), std::invalid_argument);
+  c.data = nullptr;
+  CHECK_THROWS_AS(html_data_page(c), std::invalid_argument);
 }
