@@ -1,6 +1,6 @@
-// Small helpers the diagnosis and io libraries' files shared as private copies: a printf into a
-// std::string (and a number in %.6g) for their one-sentence summaries and messages, and order
-// statistics for robust noise and span figures. Standard library only.
+// Small helpers the diagnosis, io and sim libraries' files shared as private copies: a printf into
+// a std::string (and numbers in %.6g and %.10g) for their one-sentence summaries and messages,
+// and order statistics for robust noise and span figures. Standard library only.
 #pragma once
 
 #include <algorithm>
@@ -31,6 +31,12 @@ namespace valvediag {
 // v as printf's "%.6g": the short form in which the readers and data checks quote values.
 inline std::string num6g(double v) {
   return strprintf("%.6g", v);
+}
+
+// v as printf's "%.10g": a model's parameters in its one-line description, close to exact
+// without a round trip's 17 digits.
+inline std::string num10g(double v) {
+  return strprintf("%.10g", v);
 }
 
 // The sample at rank round(p (n - 1)) of v (0 <= p <= 1): no interpolation, so the median of an

@@ -1,8 +1,9 @@
 #include "valvediag/process_models.hpp"
 
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
+
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 namespace {
@@ -44,13 +45,6 @@ Zoh zoh(const Eigen::MatrixXd& A, const Eigen::VectorXd& B, double h) {
 
 bool positive(double v) {
   return std::isfinite(v) && v > 0.0;
-}
-
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(10);
-  os << v;
-  return os.str();
 }
 
 }  // namespace
@@ -109,24 +103,24 @@ ProcessSpec integrating_process(double gain, double dead_time, double lag, doubl
 }
 
 std::string describe(const ProcessSpec& s) {
-  std::string d = to_string(s.type) + ": K=" + num(s.gain);
+  std::string d = to_string(s.type) + ": K=" + num10g(s.gain);
   switch (s.type) {
     case ProcessType::first_order:
-      d += ", tau=" + num(s.tau) + " s";
+      d += ", tau=" + num10g(s.tau) + " s";
       break;
     case ProcessType::second_order:
       if (s.wn > 0.0) {
-        d += ", wn=" + num(s.wn) + " rad/s, zeta=" + num(s.zeta);
+        d += ", wn=" + num10g(s.wn) + " rad/s, zeta=" + num10g(s.zeta);
       } else {
-        d += ", tau1=" + num(s.tau) + " s, tau2=" + num(s.tau2) + " s";
-        if (s.tau3 > 0.0) d += ", tau3=" + num(s.tau3) + " s";
+        d += ", tau1=" + num10g(s.tau) + " s, tau2=" + num10g(s.tau2) + " s";
+        if (s.tau3 > 0.0) d += ", tau3=" + num10g(s.tau3) + " s";
       }
       break;
     case ProcessType::integrating:
-      if (s.tau > 0.0) d += ", lag=" + num(s.tau) + " s";
+      if (s.tau > 0.0) d += ", lag=" + num10g(s.tau) + " s";
       break;
   }
-  return d + ", theta=" + num(s.dead_time) + " s";
+  return d + ", theta=" + num10g(s.dead_time) + " s";
 }
 
 DiscreteProcess::DiscreteProcess(const ProcessSpec& spec, double Ts) : spec_(spec), Ts_(Ts) {

@@ -2,9 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
 #include <type_traits>
+
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 namespace {
@@ -15,14 +16,6 @@ int sign(double v) {
 
 void require(bool ok, const char* what) {
   if (!ok) throw std::invalid_argument(what);
-}
-
-// Compact number text for one-line descriptions (not for round trips).
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(10);
-  os << v;
-  return os.str();
 }
 
 }  // namespace
@@ -318,35 +311,36 @@ std::string effect_model(const ValveEffect& effect) {
 
 std::string describe(const ValveEffect& effect) {
   const std::string params = std::visit(
-      Overload{[](const HeStiction& b) { return "fs=" + num(b.fs()) + ", fd=" + num(b.fd()); },
-               [](const KanoStiction& b) { return "S=" + num(b.S()) + ", J=" + num(b.J()); },
-               [](const ChoudhuryStiction& b) { return "S=" + num(b.S()) + ", J=" + num(b.J()); },
-               [](const StenmanStiction& b) { return "d=" + num(b.d()); },
-               [](const PositionDependentStiction& b) {
-                 std::string s;
-                 for (const auto& p : b.points()) {
-                   if (!s.empty()) s += ", ";
-                   s += "x=" + num(p.position) + ": fs=" + num(p.fs) + " fd=" + num(p.fd);
-                 }
-                 return s;
-               },
-               [](const Deadband& b) { return "d=" + num(b.d()); },
-               [](const Saturation& b) {
-                 return "lower=" + num(b.lower()) + ", upper=" + num(b.upper());
-               },
-               [](const Characteristic& b) {
-                 return b.kind() == Characteristic::Kind::linear ? std::string()
-                                                                 : "R=" + num(b.rangeability());
-               },
-               [](const ActuatorLag& b) { return "tau=" + num(b.tau()) + " s"; },
-               [](const PreisachValve& b) {
-                 const auto& g = b.model().grid();
-                 int nonzero = 0;
-                 for (double m : b.model().weights()) nonzero += m != 0.0;
-                 return "umin=" + num(g.umin) + ", umax=" + num(g.umax) +
-                        ", L=" + std::to_string(g.L) + ", " + std::to_string(nonzero) +
-                        " nonzero weights";
-               }},
+      Overload{
+          [](const HeStiction& b) { return "fs=" + num10g(b.fs()) + ", fd=" + num10g(b.fd()); },
+          [](const KanoStiction& b) { return "S=" + num10g(b.S()) + ", J=" + num10g(b.J()); },
+          [](const ChoudhuryStiction& b) { return "S=" + num10g(b.S()) + ", J=" + num10g(b.J()); },
+          [](const StenmanStiction& b) { return "d=" + num10g(b.d()); },
+          [](const PositionDependentStiction& b) {
+            std::string s;
+            for (const auto& p : b.points()) {
+              if (!s.empty()) s += ", ";
+              s += "x=" + num10g(p.position) + ": fs=" + num10g(p.fs) + " fd=" + num10g(p.fd);
+            }
+            return s;
+          },
+          [](const Deadband& b) { return "d=" + num10g(b.d()); },
+          [](const Saturation& b) {
+            return "lower=" + num10g(b.lower()) + ", upper=" + num10g(b.upper());
+          },
+          [](const Characteristic& b) {
+            return b.kind() == Characteristic::Kind::linear ? std::string()
+                                                            : "R=" + num10g(b.rangeability());
+          },
+          [](const ActuatorLag& b) { return "tau=" + num10g(b.tau()) + " s"; },
+          [](const PreisachValve& b) {
+            const auto& g = b.model().grid();
+            int nonzero = 0;
+            for (double m : b.model().weights()) nonzero += m != 0.0;
+            return "umin=" + num10g(g.umin) + ", umax=" + num10g(g.umax) +
+                   ", L=" + std::to_string(g.L) + ", " + std::to_string(nonzero) +
+                   " nonzero weights";
+          }},
       effect);
   const std::string model = effect_model(effect);
   std::string s = effect_name(effect);
