@@ -72,14 +72,18 @@ TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean 
   CHECK(i.reason.find("OP does not move") == 0);
   CHECK(i.severity == 0.0);
 
-  // OP alone (a .mat benchmark loop): not judged, but a cycling valve ranks above an idle one.
-  LoopData op_only = sticky;
-  op_only.pv.clear();
-  op_only.sp.clear();
+  // OP alone (a .mat benchmark loop) cycling with a 2-minute period: not judged, but ranked
+  // above an idle loop.
+  LoopData op_only;
+  for (int k = 0; k < 3000; ++k) {
+    op_only.t.push_back(k);
+    op_only.op.push_back(50.0 + 5.0 * std::sin(2.0 * M_PI * k / 120.0) + 0.1 * std::sin(0.9 * k));
+  }
   const LoopAssessment o = assess_loop(op_only, "FIC104");
   CHECK(o.verdict == "not-enough-data");
   CHECK(o.reason.find("no PV in the record") == 0);
   CHECK(o.health.oscillating);
+  CHECK(o.health.period_s == doctest::Approx(120).epsilon(0.05));
   CHECK(o.severity == 1.0);
   std::vector<LoopAssessment> v{i, o};
   rank(v);
