@@ -14,8 +14,10 @@
 namespace valvediag {
 
 struct AssessOptions {
-  OpRange range;             // the valve's OP span (site config), for % of travel
-  DiagnoseOptions diagnose;  // the --auto climb from `linear`
+  OpRange range;  // the valve's OP span (site config), for % of travel
+  // The --auto climb from `linear`; its valve_travel.op_range is set from `range`, which is the
+  // one span a sweep holds.
+  DiagnoseOptions diagnose;
   std::size_t min_samples = 200;
 };
 

@@ -6,6 +6,7 @@
 
 #include "valvediag/identifiability.hpp"
 #include "valvediag/limit_cycle.hpp"
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag {
 
@@ -108,11 +109,6 @@ LoopHealth loop_health(const LoopData& d, const OpRange& range) {
 }
 
 std::string unusable_reason(const LoopData& d, const LoopHealth& h, std::size_t min_samples) {
-  auto num = [](double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.3g", v);
-    return std::string(b);
-  };
   if (d.pv.size() != d.size())
     return "no PV in the record (OP only): the loop-health figures come from OP; a model of the "
            "valve needs PV";
@@ -123,15 +119,18 @@ std::string unusable_reason(const LoopData& d, const LoopHealth& h, std::size_t 
   if (!(*pmax > *pmin)) return "PV does not change: is the transmitter alive?";
   const auto [omin, omax] = std::minmax_element(d.op.begin(), d.op.end());
   if (!(*omax - *omin > 4.0 * h.op_noise) || h.op_span_percent < 0.2)
-    return "OP does not move beyond its noise (span " + num(h.op_span_percent) +
-           " % of the range): the loop is in manual or the controller is idle";
+    return strprintf(
+        "OP does not move beyond its noise (span %.3g %% of the range): the loop is in manual or "
+        "the controller is idle",
+        h.op_span_percent);
   const double reversals = h.op_reversals_per_hour * h.duration_s / 3600.0;
   if (reversals < 4)
-    return "OP reverses " + num(std::round(reversals)) +
-           " times in the window; at least 4 are needed to see the valve's friction";
+    return strprintf(
+        "OP reverses %.3g times in the window; at least 4 are needed to see the valve's friction",
+        std::round(reversals));
   if (h.time_at_limits_percent > 95.0)
-    return "OP sits at its limits " + num(h.time_at_limits_percent) +
-           " % of the time: the valve cannot act on the loop";
+    return strprintf("OP sits at its limits %.3g %% of the time: the valve cannot act on the loop",
+                     h.time_at_limits_percent);
   PreisachGrid grid;
   grid.umin = *omin;
   grid.umax = *omax;
