@@ -2,13 +2,44 @@
 # Speed of the identification: full default grid at several N, beside a straightforward baseline
 # (dense relay matrix, cold NNLS per solve) built from the same code, in one run. Then the
 # recorder's load benchmark: 50 loops x OP/PV/SP at 10 Hz from the simulated PLC over loopback
-# for LOAD_SECONDS (default 60) s, and the SQLite insert rate. Arguments go to the first part.
+# for LOAD_SECONDS (default 60) s, and the SQLite insert rate. Then the sweep's throughput: six
+# simulated loops swept on one core (the baseline), with --jobs 1 (each loop's fits threaded over
+# the cores) and with one loop per core; SWEEP_REPS (default 3) runs each, medians and speed-ups. Arguments go to the first part.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
-cmake --build build -j"$(nproc)" --target valvediag_bench valvediag_load_bench >/dev/null
+cmake --build build -j"$(nproc)" --target valvediag_bench valvediag_load_bench valvediag >/dev/null
 build/bench/valvediag_bench "$@"
 echo
 echo "== recorder load"
 build/bench/valvediag_load_bench "${LOAD_SECONDS:-60}"
+
+echo
+cores=$(nproc)
+echo "== sweep: 6 simulated loops of 2000 samples; one core (taskset) beside --jobs 1 and --jobs $cores"
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+v=build/src/cli/valvediag
+for s in paper-ex1 kano deadband linear-clean characteristic second-order; do
+  $v simulate --scenario "$s" --seed 1 --samples 2000 --out "$work/$s.csv" >/dev/null
+done
+# Wall seconds of one sweep over the files; arguments: a command prefix (may be empty), --jobs.
+sweep_seconds() {
+  local t0 t1
+  t0=$(date +%s.%N)
+  $1 $v sweep "$work"/*.csv --jobs "$2" --json "$work/out.json" >/dev/null
+  t1=$(date +%s.%N)
+  awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f\n", b - a }'
+}
+median() { sort -n | awk '{ v[NR] = $1 } END { print v[int((NR + 1) / 2)] }'; }
+reps=${SWEEP_REPS:-3}
+base=$(for _ in $(seq "$reps"); do sweep_seconds "taskset -c 0" 1; done | median)
+one=$(for _ in $(seq "$reps"); do sweep_seconds "" 1; done | median)
+all=$(for _ in $(seq "$reps"); do sweep_seconds "" "$cores"; done | median)
+awk -v base="$base" -v one="$one" -v all="$all" -v c="$cores" -v r="$reps" 'BEGIN {
+  printf "  one core (baseline):  %6.2f s, %5.1f loops/min\n", base, 6 * 60 / base
+  printf "  --jobs 1, %d threads:  %6.2f s, %5.1f loops/min, %.2f x the baseline\n", c, one, 6 * 60 / one, base / one
+  printf "  --jobs %d, 1 thread:   %6.2f s, %5.1f loops/min, %.2f x the baseline\n", c, all, 6 * 60 / all, base / all
+  printf "  (medians of %d runs)\n", r
+}'
