@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "valvediag/diagnosis.hpp"
@@ -55,15 +56,19 @@ struct HtmlReport {
 // GnuplotMissing (see require_plots).
 HtmlReport html_report(const ReportContent& content, const ReportOptions& opt = {});
 
-// A page for a record no model was fitted to (a sweep's not-enough-data loop): why, the
+// A page for a record no model was fitted to (a sweep's not-enough-data loop, or a ladder with no
+// stable linear part): why, the
 // loop-health figures and the trend of what was recorded (OP alone when PV is missing), so the
 // engineer sees what the data lacks without opening the file.
 struct DataPageContent {
-  const LoopData* data = nullptr;       // required: t, op (pv, sp, mv when present)
-  std::string data_name;                // as shown
-  std::string verdict;                  // e.g. not-enough-data
-  std::string reason;                   // why there is no model
-  const LoopHealth* health = nullptr;   // nullptr: not shown
+  const LoopData* data = nullptr;      // required: t, op (pv, sp, mv when present)
+  std::string data_name;               // as shown
+  std::string verdict;                 // e.g. not-enough-data
+  std::string reason;                  // why there is no model
+  const LoopHealth* health = nullptr;  // nullptr: not shown
+  // Further rows of the summary, shown as given: what the verdict rests on when there is one
+  // (limit cycle, whole record).
+  std::vector<std::pair<std::string, std::string>> findings;
   std::vector<std::string> notes;       // shown under the header (data notes)
   std::string generated;                // date shown; empty: now (UTC)
   std::string generator = "valvediag";  // program and version in the footer

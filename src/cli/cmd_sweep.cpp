@@ -134,13 +134,14 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   LoopAssessment r = assess_loop(d, job.name, opt, &dg);
   if (!a.reports.empty() && (!dg.steps.empty() || d.size() >= 2)) {
     // The loop's page: the climbed ladder's top model, where it fails, the findings; without a
-    // model (not-enough-data), why, the loop-health figures and the trend.
+    // model (not-enough-data, or no stable linear part), why, the loop-health figures and the
+    // trend.
     const fs::path path = fs::path(a.reports) / (job.name + ".html");
     const std::string shown = job.file.empty() ? a.db + ", loop " + job.name : job.file;
     ReportOptions ro;
     ro.require_plots = false;  // without gnuplot the page says so in place of each plot
     try {
-      if (!dg.steps.empty()) {
+      if (!dg.steps.empty() && dg.last().fit.status != ModelFitStatus::NoStableModel) {
         std::vector<HistoryEntry> ladder;
         for (const auto& s : dg.steps) ladder.push_back(history_entry(s.fit, "sweep"));
         ReportContent c;
@@ -161,6 +162,9 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
         c.verdict = r.verdict;
         c.reason = r.error.empty() ? r.reason : r.error;
         c.health = &r.health;
+        if (r.limit_cycle.oscillating)
+          c.findings.emplace_back("limit cycle", r.limit_cycle.summary);
+        if (r.whole_record.tested) c.findings.emplace_back("whole record", r.whole_record.summary);
         c.notes = notes;
         c.generator = "valvediag sweep";
         write_page_file(path.string(), html_data_page(c, ro));

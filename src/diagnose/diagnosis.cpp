@@ -357,6 +357,11 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
 
 std::string conclusion_of(const DiagnosisStep& s, const std::vector<double>& t_axis, double Ts,
                           const std::string& why) {
+  if (s.fit.status == ModelFitStatus::NoStableModel)
+    return why + " `" + to_string(s.fit.spec) +
+           "` has no stable linear part on this record (no structure of the search gave one), "
+           "so it leaves no residual to analyse; a process that integrates (a level) needs "
+           "`integrator`.";
   const auto& r = s.residual;
   std::string c = why + " What is left: residual RMS " + strprintf("%.3g", r.rms) +
                   " against a white-noise level of " + strprintf("%.3g", r.noise_level);

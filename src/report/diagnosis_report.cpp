@@ -59,8 +59,11 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
     << " % estimation, " << num(s.fit.validation_fitness_percent) << " % validation\n";
   for (const auto& e : s.fit.effects)
     if (!e.parameters.empty()) o << "           " << e.name << ": " << params(e.parameters) << "\n";
-  o << "residual:  RMS " << num(s.residual.rms, 3) << ", white-noise level "
-    << num(s.residual.noise_level, 3) << "\n";
+  if (s.fit.status == ModelFitStatus::NoStableModel)
+    o << "residual:  none (no stable model, so no simulated PV)\n";
+  else
+    o << "residual:  RMS " << num(s.residual.rms, 3) << ", white-noise level "
+      << num(s.residual.noise_level, 3) << "\n";
   o << "findings (most likely missing first):\n";
   o << "  rank  effect          score  gain (val / est)      evidence\n";
   int rank = 0;
@@ -310,8 +313,11 @@ std::string format_model_fit(const ModelFit& f, const ResidualAnalysis& where,
   if (std::isfinite(f.validation_fitness_percent))
     o << ", " << num(f.validation_fitness_percent) << " % on validation data";
   o << " (simulated output, eq 20)\n";
-  o << "where it fails: residual RMS " << num(where.rms, 3) << ", white-noise level "
-    << num(where.noise_level, 3) << "\n";
+  if (f.status == ModelFitStatus::NoStableModel)
+    o << "where it fails: nowhere to say (no stable model, so no simulated PV)\n";
+  else
+    o << "where it fails: residual RMS " << num(where.rms, 3) << ", white-noise level "
+      << num(where.noise_level, 3) << "\n";
   std::size_t shown = 0;
   for (const auto& iv : where.intervals) {
     if (shown++ == 3) break;

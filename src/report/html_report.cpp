@@ -1085,8 +1085,10 @@ HtmlReport html_data_page(const DataPageContent& c, const ReportOptions& opt) {
       std::string("OP") + (d.has_pv() ? ", PV" : "") + (d.has_sp() ? ", SP" : "") +
           (d.has_mv() ? ", valve position (MV)" : ""));
   row(o, "generated", e(generated));
-  row(o, "model", "none: " + e(c.reason));
+  row(o, "model", "none");
+  row(o, "why", e(c.reason));
   row(o, "verdict", "<span class=\"verdict\">" + e(c.verdict) + "</span>");
+  for (const auto& [head, text] : c.findings) row(o, head, e(text));
   o << "</table>\n";
   for (const auto& n : c.notes) o << "<p class=\"note\">" << e(n) << "</p>\n";
   o << "</section>\n";

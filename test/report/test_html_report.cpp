@@ -336,7 +336,8 @@ TEST_CASE("the page of a record without a model: why, the loop-health figures, O
   CHECK(has(figure(p, "plot-trends"), "<text>OP</text>"));
   CHECK_FALSE(has(figure(p, "plot-trends"), "<text>PV</text>"));
   CHECK(has(p, "<tr><th>recorded</th><td>OP</td></tr>"));
-  CHECK(has(p, "none: no PV in the record (OP only)"));
+  CHECK(has(p, "<tr><th>model</th><td>none</td></tr>"));
+  CHECK(has(p, "<tr><th>why</th><td>no PV in the record (OP only)</td></tr>"));
   CHECK(has(p, "<span class=\"verdict\">not-enough-data</span>"));
   CHECK(has(p, "yes, in OP: period 118 s, amplitude 6.250, regularity 4.20"));
   CHECK(has(p, "61.0 per hour (beyond the OP noise band 0.050)"));
@@ -348,9 +349,11 @@ TEST_CASE("the page of a record without a model: why, the loop-health figures, O
   LoopData full = run_scenario(scenario_by_name("paper-ex1"), 1, 1500);
   c.data = &full;
   c.health = nullptr;
+  c.findings = {{"whole record", "a slow load fits it better <97.8 %>"}};
   const std::string q = html_data_page(c).html;
   CHECK(has(figure(q, "plot-trends"), "Trends: OP, PV and SP"));
   CHECK_FALSE(has(q, "id=\"health\""));
+  CHECK(has(q, "<tr><th>whole record</th><td>a slow load fits it better &lt;97.8 %&gt;</td></tr>"));
   full.pv.resize(10);
   CHECK_THROWS_AS(html_data_page(c), std::invalid_argument);
   c.data = nullptr;

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -267,6 +268,52 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
   CHECK(table["no-stiction"]["stiction"] == 0);
   // The export with duplicate time stamps is refused, naming its line; the sweep goes on.
   CHECK(table["stiction"]["error"] == 1);
+}
+
+// A level loop (LIC30501, 12 Dec) on which no structure gives `linear` a stable part: fit says
+// so (exit 3), diagnose quotes no residual, and the sweep's page cannot show a model, so it says
+// why, beside the whole-record test the verdict rests on.
+TEST_CASE("sweep --reports: a loop whose ladder has no stable model gets the data page") {
+  const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
+                        "stic_2411LIC30501_1212_0008_Stick1=0.95907.txt";
+  auto with_layout = [](std::vector<std::string> a) {
+    for (const char* x :
+         {"--delimiter", "tab", "--skip-lines", "2", "--skip-after-header", "2", "--time-format",
+          "%Y-%m-%d %H:%M:%S", "--t", "1", "--op", "*.MV", "--pv", "*.PV", "--sp", "*.SV"})
+      a.push_back(x);
+    return a;
+  };
+  const test::CliResult fit =
+      run(with_layout({"fit", file.string(), "--model", "linear", "--no-history"}));
+  INFO(fit.out);
+  CHECK(fit.status == 3);
+  CHECK(fit.out.find("where it fails: nowhere to say (no stable model") != std::string::npos);
+  CHECK(fit.out.find("residual RMS") == std::string::npos);
+  const test::CliResult diag = run(with_layout({"diagnose", file.string(), "--no-history"}));
+  INFO(diag.out);
+  CHECK(diag.status == 0);
+  CHECK(diag.out.find("residual:  none (no stable model") != std::string::npos);
+
+  const fs::path pages = kTmp / "pages-nostable";
+  fs::remove_all(pages);
+  const std::string out = (kTmp / "nostable.json").string();
+  const test::CliResult r =
+      run(with_layout({"sweep", file.string(), "--json", out, "--reports", pages.string()}));
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  const nlohmann::json l = read_json(out)["loops"][0];
+  CHECK(l["error"] == "");
+  CHECK(l["ladder"][0]["fitness_percent"].is_null());  // linear: no stable model
+  const std::string reason = l["reason"];
+  CHECK(reason.find("`linear` has no stable linear part on this record") != std::string::npos);
+  CHECK(reason.find("white-noise level") == std::string::npos);  // no residual to quote
+  std::ifstream f(l["report"].get<std::string>());
+  REQUIRE(f);
+  const std::string page((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  CHECK(page.find("<tr><th>model</th><td>none</td></tr>") != std::string::npos);
+  CHECK(page.find("<tr><th>whole record</th><td>on the whole record") != std::string::npos);
+  CHECK(page.find("id=\"health\"") != std::string::npos);
+  fs::remove_all(pages);
 }
 
 TEST_CASE("sweep: a loop over its time limit is stopped and reported; user errors exit 2") {
