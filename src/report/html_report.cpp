@@ -14,6 +14,7 @@
 
 #include "number_format.hpp"
 #include "valvediag/fit_report.hpp"
+#include "valvediag/text_stats.hpp"
 #include "valvediag/verdict.hpp"
 
 namespace valvediag {
@@ -1109,7 +1110,7 @@ HtmlReport html_data_page(const DataPageContent& c, const ReportOptions& opt) {
                          : "none found in " + e(what));
     row(o, "OP reversals",
         e(num(h.op_reversals_per_hour, 1)) + " per hour (beyond the OP noise band " +
-            e(num(h.op_noise, 3)) + ")");
+            e(strprintf("%.3g", h.op_noise)) + ")");
     row(o, "OP travel", e(num(h.op_travel_percent_per_hour, 1)) + " % of the OP range per hour");
     row(o, "OP span", e(num(h.op_span_percent, 1)) + " % of the OP range");
     row(o, "time at OP limits", e(num(h.time_at_limits_percent, 1)) + " %");

@@ -340,7 +340,7 @@ TEST_CASE("the page of a record without a model: why, the loop-health figures, O
   CHECK(has(p, "<tr><th>why</th><td>no PV in the record (OP only)</td></tr>"));
   CHECK(has(p, "<span class=\"verdict\">not-enough-data</span>"));
   CHECK(has(p, "yes, in OP: period 118 s, amplitude 6.250, regularity 4.20"));
-  CHECK(has(p, "61.0 per hour (beyond the OP noise band 0.050)"));
+  CHECK(has(p, "61.0 per hour (beyond the OP noise band 0.05)"));
   CHECK(has(p, "bench &lt;mat&gt; &amp; loop"));
   CHECK(has(p, "read &lt;loop&gt;"));
   CHECK_FALSE(has(p, "<mat>"));
