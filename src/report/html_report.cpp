@@ -701,6 +701,18 @@ void row(std::ostringstream& o, const std::string& head, const std::string& html
   o << "<tr><th>" << e(head) << "</th><td>" << html_value << "</td></tr>\n";
 }
 
+// The record's rows of a page's summary: name, source, samples (`span_note` after the time
+// span), sample period.
+void record_rows(std::ostringstream& o, const LoopData& d, const std::string& name,
+                 const std::string& span_note) {
+  row(o, "data", e(name));
+  if (!d.source.empty() && d.source != name) row(o, "source", e(d.source));
+  row(o, "samples",
+      std::to_string(d.size()) + " (t " + e(num(d.t.front(), 1)) + " .. " + e(num(d.t.back(), 1)) +
+          " s" + e(span_note) + ")");
+  row(o, "sample period Ts", e(num(d.sample_period(), 3)) + " s");
+}
+
 std::string verdict_of(const ReportContent& c) {
   return c.diagnosis != nullptr && !c.diagnosis->steps.empty() ? verdict(*c.diagnosis) : "";
 }
@@ -709,12 +721,7 @@ void header_section(std::ostringstream& o, const ReportContent& c) {
   const LoopData& d = *c.data;
   const ModelFit& f = *c.fit;
   o << "<section id=\"summary\">\n<table class=\"header\">\n";
-  row(o, "data", e(c.data_name));
-  if (!d.source.empty() && d.source != c.data_name) row(o, "source", e(d.source));
-  row(o, "samples",
-      std::to_string(d.size()) + " (t " + e(num(d.t.front(), 1)) + " .. " + e(num(d.t.back(), 1)) +
-          " s)");
-  row(o, "sample period Ts", e(num(d.sample_period(), 3)) + " s");
+  record_rows(o, d, c.data_name, "");
   row(o, "generated", e(c.generated));
   std::string model = "<code>" + e(to_string(f.spec)) + "</code> (na " +
                       std::to_string(f.structure.na) + ", nb " + std::to_string(f.structure.nb) +
@@ -1076,12 +1083,7 @@ HtmlReport html_data_page(const DataPageContent& c, const ReportOptions& opt) {
   std::ostringstream o;
   page_head(o, c.data_name);
   o << "<section id=\"summary\">\n<table class=\"header\">\n";
-  row(o, "data", e(c.data_name));
-  if (!d.source.empty() && d.source != c.data_name) row(o, "source", e(d.source));
-  row(o, "samples",
-      std::to_string(d.size()) + " (t " + e(num(d.t.front(), 1)) + " .. " + e(num(d.t.back(), 1)) +
-          " s, " + e(duration_text(d.t.back() - d.t.front())) + ")");
-  row(o, "sample period Ts", e(num(d.sample_period(), 3)) + " s");
+  record_rows(o, d, c.data_name, ", " + duration_text(d.t.back() - d.t.front()));
   row(o, "recorded",
       std::string("OP") + (d.has_pv() ? ", PV" : "") + (d.has_sp() ? ", SP" : "") +
           (d.has_mv() ? ", valve position (MV)" : ""));
