@@ -140,6 +140,8 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* theta, const Inp
 struct NamedValue {
   std::string name;
   double value = 0.0;
+  // "OP": the controller output's own units (a band's width or a level). It equals % of travel
+  // only when OP spans 0..100; the stiction figures give the share of travel (OpRange).
   std::string unit;
 };
 // The physical parameters of a block as reported: fs, fd / S, J / d / lower, upper / R / tau.

@@ -444,8 +444,8 @@ ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y
     if (fe.name != "preisach") continue;
     fe.parameters = {{"L", static_cast<double>(m.grid.L), "levels"},
                      {"nonzero_weights", static_cast<double>(nonzero), ""},
-                     {"umin", m.grid.umin, "%"},
-                     {"umax", m.grid.umax, "%"}};
+                     {"umin", m.grid.umin, "OP"},
+                     {"umax", m.grid.umax, "OP"}};
   }
   std::optional<ArxEstimator> est;
   if (lo.drift) {

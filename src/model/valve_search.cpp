@@ -23,15 +23,15 @@ std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputR
   const double R = std::max(r.umax - r.umin, 1e-9);
   if (e.name == "stiction") {
     if (e.variant == "he" || e.variant.empty())
-      return {{"fs", "%", 0.0, R}, {"fd/fs", "", 0.0, 1.0}, {"motion at start", "", -1.0, 1.0, 3}};
+      return {{"fs", "OP", 0.0, R}, {"fd/fs", "", 0.0, 1.0}, {"motion at start", "", -1.0, 1.0, 3}};
     if (e.variant == "kano" || e.variant == "choudhury")
-      return {{"S", "%", 0.0, R}, {"J/S", "", 0.0, 1.0}};
-    if (e.variant == "stenman") return {{"d", "%", 0.0, R}};
+      return {{"S", "OP", 0.0, R}, {"J/S", "", 0.0, 1.0}};
+    if (e.variant == "stenman") return {{"d", "OP", 0.0, R}};
     throw std::invalid_argument("stiction: unknown variant '" + e.variant + "'");
   }
-  if (e.name == "deadband") return {{"d", "%", 0.0, R}};
+  if (e.name == "deadband") return {{"d", "OP", 0.0, R}};
   if (e.name == "saturation")
-    return {{"lower", "%", r.umin, r.umax - R / 100}, {"upper share", "", 0.01, 1.0}};
+    return {{"lower", "OP", r.umin, r.umax - R / 100}, {"upper share", "", 0.01, 1.0}};
   if (e.name == "characteristic") {
     if (e.variant == "auto" || e.variant.empty()) return {{"curvature", "", -kLnRMax, kLnRMax}};
     return {{"ln R", "", kLinearCurvature, kLnRMax}};
@@ -78,24 +78,24 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
 
 std::vector<NamedValue> block_parameters(const ValveEffect& block) {
   return std::visit(Overload{[](const HeStiction& b) -> std::vector<NamedValue> {
-                               return {{"fs", b.fs(), "%"},
-                                       {"fd", b.fd(), "%"},
+                               return {{"fs", b.fs(), "OP"},
+                                       {"fd", b.fd(), "OP"},
                                        {"initial_motion", b.initial_motion(), ""}};
                              },
                              [](const KanoStiction& b) -> std::vector<NamedValue> {
-                               return {{"S", b.S(), "%"}, {"J", b.J(), "%"}};
+                               return {{"S", b.S(), "OP"}, {"J", b.J(), "OP"}};
                              },
                              [](const ChoudhuryStiction& b) -> std::vector<NamedValue> {
-                               return {{"S", b.S(), "%"}, {"J", b.J(), "%"}};
+                               return {{"S", b.S(), "OP"}, {"J", b.J(), "OP"}};
                              },
                              [](const StenmanStiction& b) -> std::vector<NamedValue> {
-                               return {{"d", b.d(), "%"}};
+                               return {{"d", b.d(), "OP"}};
                              },
                              [](const Deadband& b) -> std::vector<NamedValue> {
-                               return {{"d", b.d(), "%"}};
+                               return {{"d", b.d(), "OP"}};
                              },
                              [](const Saturation& b) -> std::vector<NamedValue> {
-                               return {{"lower", b.lower(), "%"}, {"upper", b.upper(), "%"}};
+                               return {{"lower", b.lower(), "OP"}, {"upper", b.upper(), "OP"}};
                              },
                              [](const Characteristic& b) -> std::vector<NamedValue> {
                                if (b.kind() == Characteristic::Kind::linear)

@@ -257,8 +257,8 @@ ModelFit model_fit_of(const IdentificationResult& r, const std::vector<double>& 
                        "",
                        {{"L", static_cast<double>(m.grid.L), "levels"},
                         {"nonzero_weights", static_cast<double>(nonzero), ""},
-                        {"umin", m.grid.umin, "%"},
-                        {"umax", m.grid.umax, "%"}}});
+                        {"umin", m.grid.umin, "OP"},
+                        {"umax", m.grid.umax, "OP"}}});
   return f;
 }
 

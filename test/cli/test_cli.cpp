@@ -279,6 +279,11 @@ TEST_CASE("diagnose reads friction from a recorded valve position") {
   const auto n = nlohmann::json::parse(m);
   CHECK(n["valve_travel"]["fs_percent"].get<double>() == doctest::Approx(1.5).epsilon(0.1));
   CHECK(n["stiction_percent"].get<double>() == doctest::Approx(1.5).epsilon(0.1));
+  // The model's own parameter stays in OP units (3 of 200), and says so: it is not a share.
+  CHECK(n["effects"][0]["parameters"]["d"].get<double>() == doctest::Approx(3.0).epsilon(0.1));
+  const auto at = w.out.find("stiction: d 3.0");
+  REQUIRE(at != std::string::npos);
+  CHECK(w.out.substr(at, w.out.find('\n', at) - at).ends_with(" OP"));
   // A range OP leaves is named in a note (the figures would be wrong); a malformed one is a
   // user error.
   auto narrow = run(one + "--op-range 0:40");
