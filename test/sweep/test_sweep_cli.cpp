@@ -263,6 +263,17 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
   const double clean = 1.0 - table["no-stiction"]["stiction"] / 23.0;
   std::printf("balanced accuracy %.1f %% (sticky found %.1f %%, clean kept %.1f %%)\n",
               50 * (found + clean), 100 * found, 100 * clean);
+  // Beside it, over the records that can be judged (neither not-enough-data nor refused): the
+  // goal counts the others as misses, so this is not the figure it is measured by.
+  auto judged = [&](const char* label) {
+    return table[label]["stiction"] + table[label]["deadband"] +
+           table[label]["other-nonlinearity"] + table[label]["no-valve-problem"];
+  };
+  const double found_j = table["stiction"]["stiction"] / static_cast<double>(judged("stiction"));
+  const double clean_j =
+      1.0 - table["no-stiction"]["stiction"] / static_cast<double>(judged("no-stiction"));
+  std::printf("judged records only (%d of 41): balanced accuracy %.1f %% (sticky found %.1f %%)\n",
+              judged("stiction") + judged("no-stiction"), 50 * (found_j + clean_j), 100 * found_j);
   // As measured (README); the issue aims at 85 % with at most 10 % false sticky.
   CHECK(table["stiction"]["stiction"] >= 12);
   CHECK(table["no-stiction"]["stiction"] == 0);
