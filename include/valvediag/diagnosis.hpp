@@ -82,7 +82,8 @@ Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, d
                    const ModelSpec& model, const DiagnoseOptions& opt = {});
 
 // Climbs the ladder: adds the best supported effect while the validation error falls by a
-// meaningful margin, then stops with a statement of what is left.
+// meaningful margin, then stops with a statement of what is left. When `start` has no stable
+// linear part, the climb goes on from its `integrator` trial if that one is stable (a level).
 Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                         const ModelSpec& start, const DiagnoseOptions& opt = {});
 

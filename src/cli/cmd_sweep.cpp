@@ -134,8 +134,8 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   LoopAssessment r = assess_loop(d, job.name, opt, &dg);
   if (!a.reports.empty() && (!dg.steps.empty() || d.size() >= 2)) {
     // The loop's page: the climbed ladder's top model, where it fails, the findings; without a
-    // model (not-enough-data, or no stable linear part), why, the loop-health figures and the
-    // trend.
+    // model (not-enough-data, or no stable model on the ladder), why, the loop-health figures and
+    // the trend.
     const fs::path path = fs::path(a.reports) / (job.name + ".html");
     const std::string shown = job.file.empty() ? a.db + ", loop " + job.name : job.file;
     ReportOptions ro;

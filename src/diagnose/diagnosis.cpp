@@ -376,6 +376,14 @@ std::string conclusion_of(const DiagnosisStep& s, const std::vector<double>& t_a
   return c + ".";
 }
 
+// The step the climb starts from: the first with a stable model (diagnose_auto goes on from
+// `integrator` when `linear` has none), else the first.
+const DiagnosisStep& start_step(const Diagnosis& d) {
+  for (const auto& s : d.steps)
+    if (s.fit.status != ModelFitStatus::NoStableModel) return s;
+  return d.steps.front();
+}
+
 // The limit-cycle test with the best model driven by OP alone: the step of highest estimation
 // fitness without `disturbance` (a load estimated from PV could carry an outside oscillation and
 // pass it for OP's). The process integrates when a model has `integrator` or the first step's
@@ -389,11 +397,12 @@ LimitCycle limit_cycle_of(const std::vector<double>& u, const std::vector<double
     if (s.fit.spec.has("disturbance") || !std::isfinite(s.fit.fitness_percent)) continue;
     if (!driven || s.fit.fitness_percent > driven->fitness_percent) driven = &s.fit;
   }
-  // The trial fits from the first step: the best with memory (stiction, preisach) and the best
+  // The trial fits from the start step: the best with memory (stiction, preisach) and the best
   // without; the smaller of each trial's estimation and held-out gains.
   TrialEvidence trials;
-  trials.start_fitness = d.steps.front().fit.fitness_percent;
-  for (const auto& f : d.steps.front().findings) {
+  const DiagnosisStep& start = start_step(d);
+  trials.start_fitness = start.fit.fitness_percent;
+  for (const auto& f : start.findings) {
     if (f.effect == "integrator" && f.supported) integrating = true;
     const bool memory = f.effect == "stiction" || f.effect == "preisach";
     double& best = memory ? trials.memory_gain : trials.rival_gain;
@@ -416,7 +425,7 @@ WholeRecordTest whole_record_of(const std::vector<double>& u, const std::vector<
     m = d.last().findings.front().trial_spec;
   if (m.has("stiction") || m.has("preisach") || m.has("deadband")) return {};
   try {
-    return whole_record_test(u, y, Ts, d.steps.front().fit.spec, fit_options(opt),
+    return whole_record_test(u, y, Ts, start_step(d).fit.spec, fit_options(opt),
                              opt.whole_record_options);
   } catch (const std::invalid_argument&) {
     return {};  // e.g. too few samples for a variant's estimator: the test does not decide
@@ -499,7 +508,7 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
                         const ModelSpec& start, const DiagnoseOptions& opt) {
   Diagnosis d;
   ModelSpec model = start;
-  std::string why, joint;
+  std::string why, joint, restart;
   for (int k = 0;; ++k) {
     d.steps.push_back(evaluate(u, y, Ts, model, opt));
     const auto& f = d.last().findings;
@@ -510,6 +519,21 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
     if (f.empty()) {
       why = "Every effect of the vocabulary is in the model.";
       break;
+    }
+    // A start with no stable linear part leaves its trials nothing to gain against (their
+    // gains count from 0). A process that integrates (a level) fitted as self-regulating is the
+    // usual cause: go on from `integrator` when that fits, as the engineer would.
+    if (k == 0 && d.last().fit.status == ModelFitStatus::NoStableModel) {
+      const auto it = std::find_if(f.begin(), f.end(), [](const Finding& x) {
+        return x.effect == "integrator" && std::isfinite(x.trial_fitness_percent);
+      });
+      if (it != f.end() && k < opt.max_steps) {
+        restart = "`" + to_string(model) +
+                  "` has no stable linear part on this record, so the climb went on from `" +
+                  to_string(it->trial_spec) + "` (a process that integrates).";
+        model = it->trial_spec;
+        continue;
+      }
     }
     const Finding& best = f.front();
     const double gain = best.gain_percent;
@@ -535,6 +559,7 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
   d.conclusion = with_whole_record(
       with_limit_cycle(conclusion_of(d.last(), {}, Ts, why), d.limit_cycle), d.whole_record);
   if (!joint.empty()) d.conclusion = joint + " " + d.conclusion;
+  if (!restart.empty()) d.conclusion = restart + " " + d.conclusion;
   return d;
 }
 

@@ -330,7 +330,7 @@ void describe_process_effects(ModelFit& fit, const ArxEstimator* est, double Ts)
       for (double v : fit.a) a1 += v;
       for (double v : fit.b) bsum += v;
       if (fe.name == "integrator") {
-        fe.parameters = {{"rate_gain", bsum / a1 / Ts, "PV/s per %"}};
+        fe.parameters = {{"rate_gain", bsum / a1 / Ts, "PV/s per OP"}};
       } else if (!fit.disturbance.empty()) {
         const auto [lo, hi] = std::minmax_element(
             fit.disturbance.begin() + static_cast<std::ptrdiff_t>(fit.first_sample),

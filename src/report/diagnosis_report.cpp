@@ -26,7 +26,7 @@ std::string params(const std::vector<NamedValue>& p) {
   std::string s;
   for (const auto& v : p) {
     if (!s.empty()) s += ", ";
-    s += v.name + " " + num(v.value, 3) + (v.unit.empty() ? "" : " " + v.unit);
+    s += v.name + " " + report_format::parameter(v.value) + (v.unit.empty() ? "" : " " + v.unit);
   }
   return s;
 }

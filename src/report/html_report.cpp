@@ -678,8 +678,7 @@ std::string params_text(const std::vector<NamedValue>& p) {
   std::string s;
   for (const auto& v : p) {
     if (!s.empty()) s += ", ";
-    const bool whole = v.value == std::round(v.value) && std::abs(v.value) < 1e6;
-    s += v.name + " " + num(v.value, whole ? 0 : 3) + (v.unit.empty() ? "" : " " + v.unit);
+    s += v.name + " " + report_format::parameter(v.value) + (v.unit.empty() ? "" : " " + v.unit);
   }
   return s;
 }

@@ -282,9 +282,10 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
 }
 
 // A level loop (LIC30501, 12 Dec) on which no structure gives `linear` a stable part: fit says
-// so (exit 3), diagnose quotes no residual, and the sweep's page cannot show a model, so it says
-// why, beside the whole-record test the verdict rests on.
-TEST_CASE("sweep --reports: a loop whose ladder has no stable model gets the data page") {
+// so (exit 3) and diagnose quotes no residual. The sweep's climb goes on from `integrator`, as
+// an engineer would for a level, so its page shows that model and the whole-record test against
+// it (not against a model that does not exist).
+TEST_CASE("sweep --reports: a level whose `linear` has no stable part climbs from integrator") {
   const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
                         "stic_2411LIC30501_1212_0008_Stick1=0.95907.txt";
   auto with_layout = [](std::vector<std::string> a) {
@@ -314,16 +315,24 @@ TEST_CASE("sweep --reports: a loop whose ladder has no stable model gets the dat
   REQUIRE(r.status == 0);
   const nlohmann::json l = read_json(out)["loops"][0];
   CHECK(l["error"] == "");
+  REQUIRE(l["ladder"].size() >= 2);
   CHECK(l["ladder"][0]["fitness_percent"].is_null());  // linear: no stable model
+  CHECK(l["ladder"][1]["model"] == "integrator");
+  CHECK(l["ladder"][1]["fitness_percent"].get<double>() > 0.0);
+  CHECK(l["first_missing"] == "integrator");
+  // A load explains the level's drift better than a friction band (README: the misses).
+  CHECK(l["verdict"] == "no-valve-problem");
   const std::string reason = l["reason"];
-  CHECK(reason.find("`linear` has no stable linear part on this record") != std::string::npos);
-  CHECK(reason.find("white-noise level") == std::string::npos);  // no residual to quote
+  CHECK(reason.find("`linear` has no stable linear part on this record, so the climb went on "
+                    "from `integrator`") != std::string::npos);
+  CHECK(reason.find("white-noise level") != std::string::npos);  // the last model's residual
   std::ifstream f(l["report"].get<std::string>());
   REQUIRE(f);
   const std::string page((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-  CHECK(page.find("<tr><th>model</th><td>none</td></tr>") != std::string::npos);
-  CHECK(page.find("<tr><th>whole record</th><td>on the whole record") != std::string::npos);
-  CHECK(page.find("id=\"health\"") != std::string::npos);
+  CHECK(page.find("<tr><th>model</th><td><code>integrator") != std::string::npos);
+  CHECK(page.find("<li><code>linear</code>: n/a estimation, n/a validation</li>") !=
+        std::string::npos);
+  CHECK(page.find("of the error `integrator` leaves") != std::string::npos);  // not `linear`
   fs::remove_all(pages);
 }
 
