@@ -333,6 +333,9 @@ TEST_CASE("sweep --reports: a level whose `linear` has no stable part climbs fro
   CHECK(page.find("<li><code>linear</code>: n/a estimation, n/a validation</li>") !=
         std::string::npos);
   CHECK(page.find("of the error `integrator` leaves") != std::string::npos);  // not `linear`
+  // The level's rate gain is small (4e-4 PV/s per OP unit): significant digits, not "0.000".
+  CHECK(page.find("integrator: rate_gain 0.000 ") == std::string::npos);
+  CHECK(page.find(" PV/s per OP<br>") != std::string::npos);
   fs::remove_all(pages);
 }
 
