@@ -22,15 +22,6 @@ double t_at(const std::vector<double>& t, std::size_t k) {
   return k < t.size() ? t[k] : static_cast<double>(k);
 }
 
-std::string params(const std::vector<NamedValue>& p) {
-  std::string s;
-  for (const auto& v : p) {
-    if (!s.empty()) s += ", ";
-    s += v.name + " " + report_format::parameter(v.value) + (v.unit.empty() ? "" : " " + v.unit);
-  }
-  return s;
-}
-
 nlohmann::json num_json(double v) {
   return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
 }
@@ -58,7 +49,8 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
     << s.fit.structure.nb << ", nk " << s.fit.structure.nk << "): " << num(s.fit.fitness_percent)
     << " % estimation, " << num(s.fit.validation_fitness_percent) << " % validation\n";
   for (const auto& e : s.fit.effects)
-    if (!e.parameters.empty()) o << "           " << e.name << ": " << params(e.parameters) << "\n";
+    if (!e.parameters.empty())
+      o << "           " << e.name << ": " << report_format::parameters(e.parameters) << "\n";
   if (s.fit.status == ModelFitStatus::NoStableModel)
     o << "residual:  none (no stable model, so no simulated PV)\n";
   else
@@ -294,7 +286,7 @@ std::string format_ladder(const std::vector<HistoryEntry>& entries) {
     std::snprintf(line, sizeof line, "%-4zu  %-28s  %9s%%  %9s%%  %8s  %s\n", i + 1,
                   e.model.c_str(), num(e.fitness_percent).c_str(),
                   num(e.validation_fitness_percent).c_str(), change.c_str(),
-                  params(e.parameters).c_str());
+                  report_format::parameters(e.parameters).c_str());
     o << line;
   }
   return o.str();
@@ -308,7 +300,7 @@ std::string format_model_fit(const ModelFit& f, const ResidualAnalysis& where,
   for (const auto& e : f.effects)
     if (!e.parameters.empty())
       o << "           " << e.name << (e.variant.empty() ? "" : " (" + e.variant + ")") << ": "
-        << params(e.parameters) << "\n";
+        << report_format::parameters(e.parameters) << "\n";
   o << "fitness:   " << num(f.fitness_percent) << " % on estimation data";
   if (std::isfinite(f.validation_fitness_percent))
     o << ", " << num(f.validation_fitness_percent) << " % on validation data";

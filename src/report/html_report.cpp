@@ -674,15 +674,6 @@ code { background: #f4f4f4; padding: 0 0.2em; }
 footer { margin-top: 2em; font-size: 0.85em; color: #666; }
 )";
 
-std::string params_text(const std::vector<NamedValue>& p) {
-  std::string s;
-  for (const auto& v : p) {
-    if (!s.empty()) s += ", ";
-    s += v.name + " " + report_format::parameter(v.value) + (v.unit.empty() ? "" : " " + v.unit);
-  }
-  return s;
-}
-
 std::string poly_text(const std::vector<double>& c, int first_power, bool leading_one) {
   std::ostringstream o;
   if (leading_one) o << "1";
@@ -734,7 +725,7 @@ void header_section(std::ostringstream& o, const ReportContent& c) {
   for (const auto& fe : f.effects)
     if (!fe.parameters.empty())
       model += "<br>" + e(fe.name + (fe.variant.empty() ? "" : " (" + fe.variant + ")") + ": " +
-                          params_text(fe.parameters));
+                          report_format::parameters(fe.parameters));
   row(o, "model", model);
   row(o, "fitness",
       e(num(f.fitness_percent)) + " % on estimation data, " +
@@ -860,7 +851,8 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
       << e(signed_num(f.estimation_gain_percent)) << "</td><td>"
       << e(f.evidence_test.empty() ? "-" : f.evidence_test + " " + num(f.evidence, 2))
       << "</td><td>" << e(f.explanation);
-    if (!f.parameters.empty()) o << "<br><small>" << e(params_text(f.parameters)) << "</small>";
+    if (!f.parameters.empty())
+      o << "<br><small>" << e(report_format::parameters(f.parameters)) << "</small>";
     if (!f.indistinguishable_from.empty())
       o << "<br><small>as good as <code>" << e(f.indistinguishable_from)
         << "</code> on this data: the data cannot tell them apart</small>";
@@ -913,8 +905,8 @@ void ladder_section(std::ostringstream& o, const ReportContent& c) {
       << "</code></td><td class=\"num\">" << e(pct(h.fitness_percent)) << "</td><td class=\"num\">"
       << e(pct(h.validation_fitness_percent)) << "</td><td class=\"num\">" << e(change)
       << "</td><td>(" << h.na << ", " << h.nb << ", " << h.nk << ")</td><td>"
-      << e(params_text(h.parameters)) << "</td><td>" << e(h.command) << "</td><td>" << e(h.time)
-      << "</td></tr>\n";
+      << e(report_format::parameters(h.parameters)) << "</td><td>" << e(h.command) << "</td><td>"
+      << e(h.time) << "</td></tr>\n";
   }
   o << "</table>\n</section>\n";
 }

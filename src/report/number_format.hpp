@@ -1,10 +1,13 @@
-// Numbers as the reports print them: fixed decimals, a word for NaN and infinities. Private to
-// src/report.
+// Numbers as the reports print them: fixed decimals, a word for NaN and infinities; a model's
+// parameter list. Private to src/report.
 #pragma once
 
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <vector>
+
+#include "valvediag/effect_estimators.hpp"
 
 namespace valvediag::report_format {
 
@@ -34,6 +37,23 @@ inline std::string parameter(double v) {
   else
     std::snprintf(buf, sizeof buf, "%.3f", v);
   return buf;
+}
+
+// "fs 8.443 OP, fd 3.602 OP, initial_motion up": a fitted effect's parameters, for text and HTML
+// alike. He's starting motion (-1, 0, 1) is a state, so it is named.
+inline std::string parameters(const std::vector<NamedValue>& p) {
+  std::string s;
+  for (const auto& v : p) {
+    if (!s.empty()) s += ", ";
+    const bool motion = v.name.ends_with("initial_motion");
+    s += v.name + " " +
+         (motion ? (v.value < -0.5  ? "down"
+                    : v.value > 0.5 ? "up"
+                                    : "at rest")
+                 : parameter(v.value)) +
+         (v.unit.empty() ? "" : " " + v.unit);
+  }
+  return s;
 }
 
 }  // namespace valvediag::report_format
