@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <string>
 
+#include "../common/plant_csv.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/diagnosis.hpp"
 #include "valvediag/scenarios.hpp"
@@ -19,20 +20,8 @@ using namespace valvediag;
 
 namespace {
 
-// A historian export of shared/data/plant-loops (the CLI's --delimiter tab --skip-lines 2
-// --skip-after-header 2 --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV'
-// --sp '*.SV').
 LoopData read_plant(const fs::path& p) {
-  CsvOptions o;
-  o.delimiter = "tab";
-  o.skip_lines = 2;
-  o.skip_after_header = 2;
-  o.time_format = "%Y-%m-%d %H:%M:%S";
-  o.t_column.assign(1, '1');  // column 1; not = "1": GCC 12's -Wrestrict misfires on it
-  o.op_column = "*.MV";
-  o.pv_column = "*.PV";
-  o.sp_column = "*.SV";
-  return read_loop_csv(p.string(), o);
+  return read_loop_csv(p.string(), test::plant_csv_options());
 }
 
 WholeRecordTest test_on(const char* scenario, unsigned seed) {

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/plant_csv.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/loop_assessment.hpp"
@@ -29,21 +30,6 @@ constexpr bool kSanitized = true;  // 4 files: the path under the sanitizers, no
 #else
 constexpr bool kSanitized = false;
 #endif
-
-// The historian layout (the CLI's --delimiter tab --skip-lines 2 --skip-after-header 2
-// --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV').
-CsvOptions plant_options() {
-  CsvOptions o;
-  o.delimiter = "tab";
-  o.skip_lines = 2;
-  o.skip_after_header = 2;
-  o.time_format = "%Y-%m-%d %H:%M:%S";
-  o.t_column.assign(1, '1');  // column 1; not = "1": GCC 12's -Wrestrict misfires on it
-  o.op_column = "*.MV";
-  o.pv_column = "*.PV";
-  o.sp_column = "*.SV";
-  return o;
-}
 
 // Loop tag: the file name up to its date, e.g. "2411FIC20102" (several files per loop).
 std::string loop_tag(const std::string& file) {
@@ -122,7 +108,7 @@ TEST_CASE("whole-record thresholds chosen without each plant loop keep the sweep
       r.sticky_label = label == std::string("stiction");
       LoopData d;
       try {
-        d = read_loop_csv(files[i].string(), plant_options());
+        d = read_loop_csv(files[i].string(), test::plant_csv_options());
       } catch (const DataError&) {  // the export with a repeated time stamp: never sticky
         rows.push_back(r);
         continue;

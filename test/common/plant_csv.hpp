@@ -1,0 +1,23 @@
+// The layout of the historian exports in shared/data/plant-loops, for tests that read them in
+// process. The CLI equivalent: --delimiter tab --skip-lines 2 --skip-after-header 2
+// --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV'.
+#pragma once
+
+#include "valvediag/csv_reader.hpp"
+
+namespace valvediag::test {
+
+inline CsvOptions plant_csv_options() {
+  CsvOptions o;
+  o.delimiter = "tab";
+  o.skip_lines = 2;         // title line; column count / sample period / start / row count
+  o.skip_after_header = 2;  // descriptions; identification settings
+  o.time_format = "%Y-%m-%d %H:%M:%S";
+  o.t_column.assign(1, '1');  // column 1; not = "1": GCC 12's -Wrestrict misfires on it
+  o.op_column = "*.MV";
+  o.pv_column = "*.PV";
+  o.sp_column = "*.SV";
+  return o;
+}
+
+}  // namespace valvediag::test
