@@ -8,6 +8,7 @@
 // effect.
 #pragma once
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -21,11 +22,17 @@
 namespace valvediag {
 
 struct Finding {
-  std::string effect;                       // effect name (effects.md)
-  double score = 0.0;                       // 0..1, how likely this effect is the missing one
-  double validation_gain_percent = 0.0;     // fitness gained by the trial fit on validation data
-  double estimation_gain_percent = 0.0;     // ... on estimation data
-  double gain_percent = 0.0;                // the smaller of the two: what the score uses
+  std::string effect;                    // effect name (effects.md)
+  double score = 0.0;                    // 0..1, how likely this effect is the missing one
+  double validation_gain_percent = 0.0;  // fitness gained by the trial fit on validation data
+  double estimation_gain_percent = 0.0;  // ... on estimation data
+  double gain_percent = 0.0;             // the smaller of the two: what the score uses
+  // A valve with memory (stiction, deadband, preisach): the trial's held-out fitness with its
+  // valve held where the estimation part left it (NaN otherwise). What the trial gains over it
+  // is what the slips it predicts there explain; the rest of its held-out gain is PV holding
+  // while OP moves, which a load the controller compensates gives too. Reported, not scored:
+  // a stuck valve after a set-point step gives it as well (see held_valve_note).
+  double held_valve_validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();
   bool supported = false;                   // score and gain clear DiagnoseOptions' thresholds
   double evidence = 0.0;                    // strongest residual test pointing to it, 0..1
   std::string evidence_test;                // that test's name
@@ -76,6 +83,11 @@ struct Diagnosis {
   ValveTravel valve_travel;
   const DiagnosisStep& last() const { return steps.back(); }
 };
+
+// When part of a memory finding's held-out gain comes from holding the valve still rather than
+// from predicted slips (Finding::held_valve_validation_fitness_percent): one sentence saying how
+// much, for the reports; "" otherwise.
+std::string held_valve_note(const Finding& f);
 
 // One diagnosis of `model` (the last step's findings rank the candidates).
 Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, double Ts,

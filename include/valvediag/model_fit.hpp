@@ -107,6 +107,13 @@ std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector
 std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double>& u,
                                    const std::vector<double>& y);
 
+// The validation fitness (eq 20, held-out part) `fit` would have if its valve stayed, from the
+// first held-out sample on, where the estimation part left it (x_hat held; the linear part, c and
+// the load as fitted and predicted). NaN without a held-out part or a stable fit. A valve with
+// memory that predicts no movement there earns its held-out score by holding PV still, which a
+// load the controller compensates also does: only the slips it predicts confirm it.
+double held_valve_validation_fitness(const ModelFit& fit, const std::vector<double>& y);
+
 // Free parameters `effect` adds to a fitted model: a Preisach valve its nonzero weights, a load
 // one level per knot over the estimation samples, an integrator none (it fixes a pole). Used to
 // charge flexible effects (Occam's tie-breaks, BIC).

@@ -22,6 +22,10 @@ double param(const std::vector<NamedValue>& p, const char* name, double fallback
   return fallback;
 }
 
+bool is_memory(const std::string& effect) {
+  return effect == "stiction" || effect == "deadband" || effect == "preisach";
+}
+
 ModelFitOptions fit_options(const DiagnoseOptions& opt) {
   ModelFitOptions fo = opt.fit;
   if (fo.validation_fraction <= 0 && fo.validation_start == 0)
@@ -247,6 +251,10 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     f.gain_percent = std::min(f.validation_gain_percent, f.estimation_gain_percent);
     if (!std::isfinite(t.validation_fitness_percent))
       f.gain_percent = std::min(f.gain_percent, -1e9);
+    // What a valve with memory gains held out by holding still rather than by the slips it
+    // predicts there (reported, not scored: see held_valve_note).
+    if (is_memory(f.effect))
+      f.held_valve_validation_fitness_percent = held_valve_validation_fitness(t, y);
     const double rel = f.gain_percent / std::max(100.0 - base_est, 1.0);
     f.score = f.gain_percent > 0 ? 0.6 * std::clamp(rel / 0.3, 0.0, 1.0) + 0.4 * f.evidence
                                  : 0.15 * f.evidence;
@@ -294,10 +302,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   for (std::size_t i = 0; i < fits.size(); ++i)
     size[names[i]] = effect_parameter_count(names[i], fits[i], Ts);
   auto mutual = [](const std::string& a, const std::string& b) {
-    auto memory = [](const std::string& e) {
-      return e == "stiction" || e == "deadband" || e == "preisach";
-    };
-    return (memory(a) && b == "disturbance") || (memory(b) && a == "disturbance");
+    return (is_memory(a) && b == "disturbance") || (is_memory(b) && a == "disturbance");
   };
   const auto ranks_above = [margin, base_est, &size, &mutual](const Finding& a, const Finding& b) {
     const double hi = std::max(a.gain_percent, b.gain_percent);
@@ -484,6 +489,21 @@ std::optional<std::pair<DiagnosisStep, std::string>> load_with_memory(const std:
 }
 
 }  // namespace
+
+std::string held_valve_note(const Finding& f) {
+  constexpr double kNotePoints = 2.0;  // as DiagnoseOptions::min_gain_percent: worth saying
+  const double held = f.held_valve_validation_fitness_percent;
+  const double slips = f.trial_validation_fitness_percent - held;
+  if (!std::isfinite(held) || !std::isfinite(f.trial_validation_fitness_percent) ||
+      !(f.validation_gain_percent > 0) || !(f.validation_gain_percent - slips >= kNotePoints))
+    return "";
+  return "`" + f.effect + "` gains " + strprintf("%+.1f", f.validation_gain_percent) +
+         " held out, of which the slips it predicts there give " + strprintf("%+.1f", slips) +
+         " (with its valve held where the estimation part left it the model scores " +
+         strprintf("%.1f %% against %.1f %%", held, f.trial_validation_fitness_percent) +
+         "): the rest is PV holding while OP moves, which a stuck valve and a load the "
+         "controller compensates both give";
+}
 
 Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                    const ModelSpec& model, const DiagnoseOptions& opt) {

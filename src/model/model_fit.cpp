@@ -503,6 +503,30 @@ const char* to_string(ModelFitStatus s) {
   return "?";
 }
 
+double held_valve_validation_fitness(const ModelFit& fit, const std::vector<double>& y) {
+  const std::size_t N = y.size(), e0 = fit.estimation_end;
+  if (fit.status == ModelFitStatus::NoStableModel || fit.b.empty() || e0 == 0 || e0 >= N ||
+      fit.x_hat.size() != N || fit.y_sim.size() != N)
+    return kNaN;
+  // The model is linear from x_hat to PV: holding the valve adds the response to the change of
+  // x_hat, which is zero before the held-out part.
+  const std::size_t na = fit.a.size(), nb = fit.b.size();
+  const std::size_t nk = static_cast<std::size_t>(std::max(0, fit.structure.nk));
+  std::vector<double> dv(N, 0.0), ys(fit.y_sim);
+  auto dx = [&](std::size_t t) { return t >= e0 ? fit.x_hat[e0 - 1] - fit.x_hat[t] : 0.0; };
+  double dy = 0.0;
+  for (std::size_t t = e0; t < N; ++t) {
+    double s = 0.0;
+    for (std::size_t i = 1; i <= na && i <= t; ++i) s -= fit.a[i - 1] * dv[t - i];
+    for (std::size_t k = 1; k <= nb; ++k)
+      if (t >= nk + k) s += fit.b[k - 1] * dx(t - nk - k);
+    dv[t] = s;
+    dy = fit.integrating ? dy + s : s;
+    ys[t] += dy;
+  }
+  return fitness_percent(y, ys, e0, N);
+}
+
 double effect_parameter_count(const std::string& effect, const ModelFit& fit, double Ts) {
   std::vector<NamedValue> p;
   for (const auto& e : fit.effects)

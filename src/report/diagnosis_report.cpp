@@ -67,6 +67,9 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
                   f.evidence_test.empty() ? "" : num(f.evidence).c_str());
     o << line;
   }
+  for (const auto& f : s.findings)
+    if (const std::string note = held_valve_note(f); !note.empty())
+      o << "held valve: " << note << "\n";
   if (!s.findings.empty() && !s.findings.front().supported) {
     o << "first:     no effect is clearly missing: the best candidate, `"
       << s.findings.front().effect << "`, gains too little to be worth its parameters\n";
@@ -246,6 +249,9 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) 
                         {"score", f.score},
                         {"validation_gain_percent", num_json(f.validation_gain_percent)},
                         {"estimation_gain_percent", num_json(f.estimation_gain_percent)},
+                        {"gain_percent", num_json(f.gain_percent)},
+                        {"held_valve_validation_fitness_percent",
+                         num_json(f.held_valve_validation_fitness_percent)},
                         {"evidence", f.evidence},
                         {"evidence_test", f.evidence_test},
                         {"parameters", p},

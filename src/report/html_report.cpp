@@ -856,6 +856,8 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
     if (!f.indistinguishable_from.empty())
       o << "<br><small>as good as <code>" << e(f.indistinguishable_from)
         << "</code> on this data: the data cannot tell them apart</small>";
+    if (const std::string note = held_valve_note(f); !note.empty())
+      o << "<br><small>" << e(note) << "</small>";
     o << "</td></tr>\n";
   }
   o << "</table>\n";

@@ -7,6 +7,7 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <functional>
 #include <map>
@@ -285,6 +286,38 @@ TEST_CASE("a load the controller compensates is not ranked behind a valve with m
     CHECK(verdict(dg) != "stiction");
     CHECK(verdict(dg) != "deadband");
   }
+}
+
+TEST_CASE("held valve: how much of a memory trial's held-out gain its predicted slips give") {
+  // Load changes with a linear valve: He's stiction with a wide band imitates the compensated
+  // loads by holding the valve (no slip after the estimation part) and gains +27 held out over
+  // linear, which follows OP's compensating moves. Held still, the model scores the same: the
+  // slips give nothing, and the report says so.
+  const LoopData d = run_scenario(scenario_by_name("load-changes"), 3, 0);
+  const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("linear"));
+  const Finding* stiction = find(dg.last().findings, "stiction");
+  REQUIRE(stiction);
+  CHECK(stiction->validation_gain_percent > 10.0);  // the premise
+  REQUIRE(std::isfinite(stiction->held_valve_validation_fitness_percent));
+  CHECK(stiction->held_valve_validation_fitness_percent ==
+        doctest::Approx(stiction->trial_validation_fitness_percent).epsilon(0.01));
+  const std::string note = held_valve_note(*stiction);
+  CHECK(note.find("the slips it predicts there give +0.0") != std::string::npos);
+  // Reported, not scored: the gain that ranks the finding is unchanged.
+  CHECK(stiction->gain_percent == doctest::Approx(std::min(stiction->validation_gain_percent,
+                                                           stiction->estimation_gain_percent)));
+  // Memoryless effects have no held valve.
+  const Finding* load = find(dg.last().findings, "disturbance");
+  REQUIRE(load);
+  CHECK(std::isnan(load->held_valve_validation_fitness_percent));
+  CHECK(held_valve_note(*load).empty());
+  // A stick-slip cycle: the held-out slips are what the trial gains.
+  const LoopData ex1 = run_scenario(scenario_by_name("paper-ex1"), 1, 0);
+  const Diagnosis de = diagnose(ex1.op, ex1.pv, ex1.sample_period(), parse_model_spec("linear"));
+  const Finding* he = find(de.last().findings, "stiction");
+  REQUIRE(he);
+  CHECK(he->held_valve_validation_fitness_percent < he->trial_validation_fitness_percent - 50.0);
+  CHECK(held_valve_note(*he).empty());
 }
 
 TEST_CASE("--auto adds a valve with memory and a load step together when neither alone fits") {
