@@ -27,11 +27,9 @@ struct Finding {
   double validation_gain_percent = 0.0;  // fitness gained by the trial fit on validation data
   double estimation_gain_percent = 0.0;  // ... on estimation data
   double gain_percent = 0.0;             // the smaller of the two: what the score uses
-  // A valve with memory (stiction, deadband, preisach): the trial's held-out fitness with its
-  // valve held where the estimation part left it (NaN otherwise). What the trial gains over it
-  // is what the slips it predicts there explain; the rest of its held-out gain is PV holding
-  // while OP moves, which a load the controller compensates gives too. Reported, not scored:
-  // a stuck valve after a set-point step gives it as well (see held_valve_note).
+  // A valve with memory: the trial's held_valve_validation_fitness() (NaN otherwise). Reported,
+  // not scored: a stuck valve that does not slip in the held-out part holds PV as a compensated
+  // load does (see held_valve_note).
   double held_valve_validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();
   bool supported = false;                   // score and gain clear DiagnoseOptions' thresholds
   double evidence = 0.0;                    // strongest residual test pointing to it, 0..1

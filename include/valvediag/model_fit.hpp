@@ -110,8 +110,8 @@ std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double
 // The validation fitness (eq 20, held-out part) `fit` would have if its valve stayed, from the
 // first held-out sample on, where the estimation part left it (x_hat held; the linear part, c and
 // the load as fitted and predicted). NaN without a held-out part or a stable fit. A valve with
-// memory that predicts no movement there earns its held-out score by holding PV still, which a
-// load the controller compensates also does: only the slips it predicts confirm it.
+// memory that predicts no movement there earns its held-out score by holding PV still, as a load
+// the controller compensates does too; what it gains over this, its predicted slips explain.
 double held_valve_validation_fitness(const ModelFit& fit, const std::vector<double>& y);
 
 // Free parameters `effect` adds to a fitted model: a Preisach valve its nonzero weights, a load

@@ -53,6 +53,11 @@ struct ModelSpec {
   bool operator==(const ModelSpec&) const = default;
 };
 
+// Valve effects with memory (stiction, deadband, preisach): the valve's position depends on the
+// path OP took, not on its present value alone.
+bool is_memory_effect(std::string_view name);
+bool has_memory_effect(const ModelSpec& spec);
+
 // Parses "linear", "stiction", "stiction:kano+saturation", ... (spaces around names ignored).
 // Throws ModelSpecError.
 ModelSpec parse_model_spec(std::string_view text);

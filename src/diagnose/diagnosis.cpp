@@ -22,10 +22,6 @@ double param(const std::vector<NamedValue>& p, const char* name, double fallback
   return fallback;
 }
 
-bool is_memory(const std::string& effect) {
-  return effect == "stiction" || effect == "deadband" || effect == "preisach";
-}
-
 ModelFitOptions fit_options(const DiagnoseOptions& opt) {
   ModelFitOptions fo = opt.fit;
   if (fo.validation_fraction <= 0 && fo.validation_start == 0)
@@ -253,7 +249,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       f.gain_percent = std::min(f.gain_percent, -1e9);
     // What a valve with memory gains held out by holding still rather than by the slips it
     // predicts there (reported, not scored: see held_valve_note).
-    if (is_memory(f.effect))
+    if (is_memory_effect(f.effect))
       f.held_valve_validation_fitness_percent = held_valve_validation_fitness(t, y);
     const double rel = f.gain_percent / std::max(100.0 - base_est, 1.0);
     f.score = f.gain_percent > 0 ? 0.6 * std::clamp(rel / 0.3, 0.0, 1.0) + 0.4 * f.evidence
@@ -302,7 +298,8 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   for (std::size_t i = 0; i < fits.size(); ++i)
     size[names[i]] = effect_parameter_count(names[i], fits[i], Ts);
   auto mutual = [](const std::string& a, const std::string& b) {
-    return (is_memory(a) && b == "disturbance") || (is_memory(b) && a == "disturbance");
+    return (is_memory_effect(a) && b == "disturbance") ||
+           (is_memory_effect(b) && a == "disturbance");
   };
   const auto ranks_above = [margin, base_est, &size, &mutual](const Finding& a, const Finding& b) {
     const double hi = std::max(a.gain_percent, b.gain_percent);
@@ -428,7 +425,7 @@ WholeRecordTest whole_record_of(const std::vector<double>& u, const std::vector<
   ModelSpec m = d.last().fit.spec;
   if (d.steps.size() == 1 && !d.last().findings.empty() && d.last().findings.front().supported)
     m = d.last().findings.front().trial_spec;
-  if (m.has("stiction") || m.has("preisach") || m.has("deadband")) return {};
+  if (has_memory_effect(m)) return {};
   try {
     return whole_record_test(u, y, Ts, start_step(d).fit.spec, fit_options(opt),
                              opt.whole_record_options);
@@ -449,10 +446,6 @@ std::string with_whole_record(std::string conclusion, const WholeRecordTest& w) 
   return conclusion;
 }
 
-bool has_memory(const ModelSpec& m) {
-  return m.has("stiction") || m.has("preisach") || m.has("deadband");
-}
-
 // When no single effect improves both parts of the record: a valve with memory and a slow load
 // together. A load step the controller compensates biases a friction fit made without it, and a
 // load curve alone cannot follow the slips, so each fails on one part while the pair explains
@@ -466,7 +459,7 @@ std::optional<std::pair<DiagnosisStep, std::string>> load_with_memory(const std:
                                                                       const DiagnosisStep& step,
                                                                       const DiagnoseOptions& opt) {
   const ModelSpec& model = step.fit.spec;
-  if (has_memory(model) || model.has("disturbance") || !opt.candidates.empty()) return {};
+  if (has_memory_effect(model) || model.has("disturbance") || !opt.candidates.empty()) return {};
   const Finding* load = nullptr;
   for (const auto& f : step.findings)
     if (f.effect == "disturbance") load = &f;
@@ -475,7 +468,7 @@ std::optional<std::pair<DiagnosisStep, std::string>> load_with_memory(const std:
   DiagnosisStep with_load = evaluate(u, y, Ts, load->trial_spec, opt);
   if (with_load.findings.empty()) return {};
   const Finding& mem = with_load.findings.front();
-  if (!has_memory(mem.trial_spec) || !mem.supported) return {};
+  if (!has_memory_effect(mem.trial_spec) || !mem.supported) return {};
   const double est =
       finite_or(mem.trial_fitness_percent, -1e9) - finite_or(step.fit.fitness_percent, 0.0);
   const double val = finite_or(mem.trial_validation_fitness_percent, -1e9) -

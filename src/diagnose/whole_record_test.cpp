@@ -12,10 +12,6 @@ namespace valvediag {
 
 namespace {
 
-bool is_memory(const std::string& effect) {
-  return effect == "stiction" || effect == "deadband" || effect == "preisach";
-}
-
 ModelFitOptions whole(ModelFitOptions fit) {
   fit.validation_fraction = 0.0;
   fit.validation_start = 0;
@@ -71,7 +67,8 @@ void guards(const std::vector<double>& u, const std::vector<double>& y, double T
   std::vector<ModelSpec> rivals;
   std::vector<std::string> names;
   for (const auto& info : effect_vocabulary()) {
-    if (is_memory(info.name) || info.name == "disturbance" || before.has(info.name)) continue;
+    if (is_memory_effect(info.name) || info.name == "disturbance" || before.has(info.name))
+      continue;
     try {
       rivals.push_back(add_effect(before, info.name));
       names.push_back(info.name);
@@ -118,7 +115,7 @@ std::string describe(const ModelFit& base, const ModelFit& mem, const ModelSpec&
   w.memory_model = to_string(mem.spec);
   w.memory_fitness = mem.fitness_percent;
   for (const auto& e : mem.effects)
-    if (is_memory(e.name)) w.memory_effects.push_back(e);
+    if (is_memory_effect(e.name)) w.memory_effects.push_back(e);
   const double gain = w.memory_fitness - f0;
   w.relative_gain = gain / std::max(100.0 - f0, 1.0);
   return "on the whole record `" + w.memory_model + "` explains " +
@@ -132,8 +129,7 @@ WholeRecordTest whole_record_test(const std::vector<double>& u, const std::vecto
                                   double Ts, const ModelSpec& start, ModelFitOptions fit,
                                   const WholeRecordOptions& opt) {
   WholeRecordTest w;
-  for (const auto& e : start.effects)
-    if (is_memory(e.name)) return w;  // the start model has memory already
+  if (has_memory_effect(start)) return w;  // the start model has memory already
   fit = whole(fit);
   // The trial fits preferred one variant on a part of the record; on the whole record another
   // may explain the slips (a band learnt from one slip), so all are fitted.

@@ -89,6 +89,15 @@ const EffectInfo* find_effect(std::string_view name) {
   return nullptr;
 }
 
+bool is_memory_effect(std::string_view name) {
+  return name == "stiction" || name == "deadband" || name == "preisach";
+}
+
+bool has_memory_effect(const ModelSpec& spec) {
+  return std::any_of(spec.effects.begin(), spec.effects.end(),
+                     [](const EffectSpec& e) { return is_memory_effect(e.name); });
+}
+
 const EffectSpec* ModelSpec::find(std::string_view name) const {
   for (const auto& e : effects)
     if (e.name == name) return &e;

@@ -72,3 +72,15 @@ TEST_CASE("effects are added and removed relative to a spec") {
   CHECK(to_string(remove_effect(parse_model_spec("stiction:kano"), "stiction:kano")) == "linear");
   CHECK(to_string(add_effect(parse_model_spec("preisach"), "integrator")) == "preisach+integrator");
 }
+
+TEST_CASE("the valve effects with memory are stiction, deadband and preisach") {
+  for (const auto& e : effect_vocabulary()) {
+    CAPTURE(e.name);
+    const bool memory = e.name == "stiction" || e.name == "deadband" || e.name == "preisach";
+    CHECK(is_memory_effect(e.name) == memory);
+  }
+  CHECK(has_memory_effect(parse_model_spec("stiction:kano+saturation")));
+  CHECK(has_memory_effect(parse_model_spec("deadband+integrator")));
+  CHECK_FALSE(has_memory_effect(parse_model_spec("saturation+characteristic+disturbance")));
+  CHECK_FALSE(has_memory_effect(parse_model_spec("linear")));
+}
