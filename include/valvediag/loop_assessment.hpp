@@ -10,6 +10,7 @@
 #include "valvediag/diagnosis.hpp"
 #include "valvediag/loop_data.hpp"
 #include "valvediag/loop_health.hpp"
+#include "valvediag/quiet_lead_in.hpp"
 
 namespace valvediag {
 
@@ -19,6 +20,8 @@ struct AssessOptions {
   // one span a sweep holds.
   DiagnoseOptions diagnose;
   std::size_t min_samples = 200;
+  // Analyse the whole record even when OP holds still for most of it (quiet_lead_in.hpp).
+  bool keep_lead_in = false;
 };
 
 struct LadderStep {
@@ -47,13 +50,17 @@ struct LoopAssessment {
   ValveTravel valve_travel;      // the valve-travel test (not run: MV not recorded)
   double severity = 0.0;         // ranking key, higher first (see assess_loop)
   double elapsed_s = 0.0;
+  // Where the diagnosis started, s after the record's first sample: > 0 when a quiet lead-in
+  // was left out (quiet_lead_in.hpp); the loop-health figures cover the whole record.
+  double analysed_from_s = 0.0;
   std::string error;   // the analysis failed: exception text, timeout, crash
   std::string report;  // the loop's HTML report, when one was written
 };
 
 // The whole assessment of one record. Throws only for programming errors; bad or short data
 // give verdict not-enough-data with the reason.
-// `diagnosis`: receives the climbed ladder when one was run (for the loop's report).
+// `diagnosis`: receives the climbed ladder when one was run (for the loop's report); it covers
+// the record from analysed_from_s on (drop_lead_in of the data with lead_in_left_out(d, opt)).
 LoopAssessment assess_loop(const LoopData& d, const std::string& name,
                            const AssessOptions& opt = {}, Diagnosis* diagnosis = nullptr);
 
@@ -77,6 +84,9 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
 // oscillates (an unjudged loop too: in an OP-only sweep the cycling valves come first); + the
 // stiction band in % of travel / 2, at most 3.
 double severity(const LoopAssessment& a);
+
+// The quiet lead-in assess_loop leaves out of d (none with opt.keep_lead_in).
+QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt);
 
 // Highest severity first; ties by stiction size, then name.
 void rank(std::vector<LoopAssessment>& loops);

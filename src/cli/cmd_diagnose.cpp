@@ -29,7 +29,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     DataOptions data;
     std::string model = "linear";
     double validate = 0.3;
-    bool autoclimb = false, no_history = false;
+    bool autoclimb = false, no_history = false, keep_lead_in = false;
     double min_gain = 2.0;
     std::vector<std::string> candidates;
     std::string json, op_range;
@@ -50,6 +50,9 @@ void add_diagnose(CLI::App& app, int& exit_code) {
   cmd->add_option("--candidates", a->candidates, "only try these effects (comma separated)")
       ->delimiter(',');
   cmd->add_option("--json", a->json, "write model, fitness, findings, verdict as JSON");
+  cmd->add_flag("--keep-lead-in", a->keep_lead_in,
+                "diagnose the whole record even when OP holds still for most of it before the "
+                "loop moves (by default that lead-in is left out, as in a sweep)");
   cmd->add_flag("--no-history", a->no_history,
                 "do not add the fits to the model history next to the data");
   cmd->callback([a, &exit_code] {
@@ -58,8 +61,15 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     const ModelSpec spec = parse_model_spec(a->model);
     const OpRange range = parse_op_range(a->op_range);
     std::vector<std::string> notes;
-    const LoopData d = load_data(a->data, notes);
-    check_identifiable_data(d, 200, "a diagnosis");
+    const LoopData whole = load_data(a->data, notes);
+    check_identifiable_data(whole, 200, "a diagnosis");
+    // The same part of the record a sweep diagnoses (quiet_lead_in.hpp).
+    AssessOptions as;
+    as.keep_lead_in = a->keep_lead_in;
+    const QuietLeadIn lead = lead_in_left_out(whole, as);
+    const LoopData d = lead.cut() ? drop_lead_in(whole, lead.begin) : whole;
+    if (lead.cut())
+      notes.push_back(describe_lead_in(lead, whole.t) + " (--keep-lead-in analyses it all)");
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     DiagnoseOptions o;
@@ -87,6 +97,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       };
       j["stiction_percent"] = number(fr.band_percent);
       j["slip_jump_percent"] = number(fr.jump_percent);
+      j["analysed_from_s"] = lead.cut() ? whole.t[lead.begin] - whole.t.front() : 0.0;
       write_text(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }

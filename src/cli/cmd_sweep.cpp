@@ -73,6 +73,7 @@ struct SweepArgs {
   DataOptions layout;  // CSV layout for data files
   int jobs = 0;
   bool quiet = false;
+  bool keep_lead_in = false;
 };
 
 LoopAssessment failed(const LoopJob& job, const std::string& source, const std::string& why) {
@@ -90,6 +91,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   AssessOptions opt;
   opt.range = job.range;
   opt.diagnose.fit.threads = threads;
+  opt.keep_lead_in = a.keep_lead_in;
   LoopData d;
   std::vector<std::string> notes;  // column choices: the per-loop report shows them, not the sweep
   try {
@@ -132,6 +134,10 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   }
   Diagnosis dg;
   LoopAssessment r = assess_loop(d, job.name, opt, &dg);
+  // The diagnosis covers the record after a quiet lead-in: its page shows that part.
+  const QuietLeadIn lead = lead_in_left_out(d, opt);
+  const LoopData shown_data = lead.cut() && !dg.steps.empty() ? drop_lead_in(d, lead.begin) : d;
+  if (lead.cut() && !dg.steps.empty()) notes.push_back(describe_lead_in(lead, d.t));
   if (!a.reports.empty() && (!dg.steps.empty() || d.size() >= 2)) {
     // The loop's page: the climbed ladder's top model, where it fails, the findings; without a
     // model (not-enough-data, or no stable model on the ladder), why, the loop-health figures and
@@ -145,7 +151,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
         std::vector<HistoryEntry> ladder;
         for (const auto& s : dg.steps) ladder.push_back(history_entry(s.fit, "sweep"));
         ReportContent c;
-        c.data = &d;
+        c.data = &shown_data;
         c.data_name = shown;
         c.fit = &dg.last().fit;
         c.where = &dg.last().residual;
@@ -322,6 +328,9 @@ void add_sweep(CLI::App& app, int& exit_code) {
   cmd->add_option("--reports", a->reports,
                   "write each loop's HTML report into this folder (linked from --html)");
   cmd->add_flag("--quiet", a->quiet, "no line per finished loop");
+  cmd->add_flag("--keep-lead-in", a->keep_lead_in,
+                "diagnose the whole window even when OP holds still for most of it before the "
+                "loop moves (by default that lead-in is left out)");
   add_layout_options(cmd, a->layout);
   add_op_range_option(cmd, a->op_range);
   cmd->callback([a, &exit_code] {

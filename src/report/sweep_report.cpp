@@ -56,6 +56,7 @@ json assessment_json(const LoopAssessment& a) {
   j["fitness_percent"] = number(a.fitness_percent);
   j["validation_fitness_percent"] = number(a.validation_fitness_percent);
   j["first_missing"] = a.first_missing;
+  j["analysed_from_s"] = a.analysed_from_s;
   json ladder = json::array();
   for (const auto& s : a.ladder)
     ladder.push_back({{"model", s.model},
@@ -99,6 +100,8 @@ LoopAssessment assessment_from_json(const json& j) {
   a.fitness_percent = number_of(j, "fitness_percent");
   a.validation_fitness_percent = number_of(j, "validation_fitness_percent");
   a.first_missing = text_of(j, "first_missing");
+  // Results written before the quiet lead-in rule analysed the whole record.
+  if (const double f = number_of(j, "analysed_from_s"); std::isfinite(f)) a.analysed_from_s = f;
   if (j.contains("ladder") && j["ladder"].is_array())
     for (const auto& s : j["ladder"])
       a.ladder.push_back({text_of(s, "model"), number_of(s, "fitness_percent"),

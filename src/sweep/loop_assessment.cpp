@@ -1,6 +1,7 @@
 #include "valvediag/loop_assessment.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -108,6 +109,13 @@ void rank(std::vector<LoopAssessment>& loops) {
   });
 }
 
+QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt) {
+  if (opt.keep_lead_in) return {};
+  QuietLeadInOptions q;
+  q.min_samples = opt.min_samples;
+  return quiet_lead_in(d.op, q);
+}
+
 LoopAssessment assess_loop(const LoopData& d, const std::string& name, const AssessOptions& opt,
                            Diagnosis* diagnosis) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -125,11 +133,15 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
     a.verdict = "not-enough-data";
     return finish();
   }
+  const QuietLeadIn lead = lead_in_left_out(d, opt);
+  const LoopData part = lead.cut() ? drop_lead_in(d, lead.begin) : LoopData{};
+  const LoopData& x = lead.cut() ? part : d;  // what the diagnosis sees
+  if (lead.cut()) a.analysed_from_s = d.t[lead.begin] - d.t.front();
   Diagnosis dg;
   DiagnoseOptions dopt = opt.diagnose;
   dopt.valve_travel.op_range = opt.range;
   try {
-    dg = diagnose_auto(d.op, d.pv, d.mv, d.sample_period(), ModelSpec{}, dopt);
+    dg = diagnose_auto(x.op, x.pv, x.mv, x.sample_period(), ModelSpec{}, dopt);
   } catch (const std::invalid_argument& e) {
     // The usability checks passed, so this is not the data's fault: say so, do not guess.
     a.verdict = "error";
@@ -153,10 +165,15 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
     a.first_missing = dg.steps.front().findings.front().effect;
   }
-  const FrictionSize fr = friction_size(dg, d.op, d.pv, opt.range);
+  const FrictionSize fr = friction_size(dg, x.op, x.pv, opt.range);
   a.stiction_percent = fr.band_percent;
   a.slip_jump_percent = fr.jump_percent;
   a.reason = dg.conclusion;
+  if (lead.cut()) {
+    std::string s = describe_lead_in(lead, d.t);
+    s[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(s[0])));
+    a.reason = s + ". " + a.reason;
+  }
   if (diagnosis) *diagnosis = std::move(dg);
   return finish();
 }

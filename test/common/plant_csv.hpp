@@ -3,6 +3,9 @@
 // --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV'.
 #pragma once
 
+#include <string>
+#include <vector>
+
 #include "valvediag/csv_reader.hpp"
 
 namespace valvediag::test {
@@ -18,6 +21,15 @@ inline CsvOptions plant_csv_options() {
   o.pv_column = "*.PV";
   o.sp_column = "*.SV";
   return o;
+}
+
+// The same layout as command-line options, appended to `args`.
+inline std::vector<std::string> with_plant_layout(std::vector<std::string> args) {
+  for (const char* x :
+       {"--delimiter", "tab", "--skip-lines", "2", "--skip-after-header", "2", "--time-format",
+        "%Y-%m-%d %H:%M:%S", "--t", "1", "--op", "*.MV", "--pv", "*.PV", "--sp", "*.SV"})
+    args.push_back(x);
+  return args;
 }
 
 }  // namespace valvediag::test

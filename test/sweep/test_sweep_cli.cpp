@@ -11,6 +11,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "../common/plant_csv.hpp"
 #include "../common/run_cli.hpp"
 #include "valvediag/sim_plc.hpp"
 #include "valvediag/site_config.hpp"
@@ -228,10 +229,8 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
       args.push_back(files[i]);
   }
   const std::string out = (kTmp / "plant.json").string();
-  for (const char* a : {"--delimiter", "tab", "--skip-lines", "2", "--skip-after-header", "2",
-                        "--time-format", "%Y-%m-%d %H:%M:%S", "--t", "1", "--op", "*.MV", "--pv",
-                        "*.PV", "--sp", "*.SV", "--jobs", "2", "--json"})
-    args.push_back(a);
+  args = test::with_plant_layout(args);
+  for (const std::string a : {"--jobs", "2", "--json"}) args.push_back(a);
   args.push_back(out);
   const test::CliResult r = run(args, 1200.0);
   INFO(r.out);
@@ -275,7 +274,7 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
   std::printf("judged records only (%d of 41): balanced accuracy %.1f %% (sticky found %.1f %%)\n",
               judged("stiction") + judged("no-stiction"), 50 * (found_j + clean_j), 100 * found_j);
   // As measured (README); the issue aims at 85 % with at most 10 % false sticky.
-  CHECK(table["stiction"]["stiction"] >= 12);
+  CHECK(table["stiction"]["stiction"] >= 13);
   CHECK(table["no-stiction"]["stiction"] == 0);
   // The export with duplicate time stamps is refused, naming its line; the sweep goes on.
   CHECK(table["stiction"]["error"] == 1);
@@ -284,24 +283,19 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
 // A level loop (LIC30501, 12 Dec) on which no structure gives `linear` a stable part: fit says
 // so (exit 3) and diagnose quotes no residual. The sweep's climb goes on from `integrator`, as
 // an engineer would for a level, so its page shows that model and the whole-record test against
-// it (not against a model that does not exist).
+// it (not against a model that does not exist). Its OP rests for 48 minutes first: the whole
+// record is what this case is about (--keep-lead-in).
 TEST_CASE("sweep --reports: a level whose `linear` has no stable part climbs from integrator") {
   const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
                         "stic_2411LIC30501_1212_0008_Stick1=0.95907.txt";
-  auto with_layout = [](std::vector<std::string> a) {
-    for (const char* x :
-         {"--delimiter", "tab", "--skip-lines", "2", "--skip-after-header", "2", "--time-format",
-          "%Y-%m-%d %H:%M:%S", "--t", "1", "--op", "*.MV", "--pv", "*.PV", "--sp", "*.SV"})
-      a.push_back(x);
-    return a;
-  };
   const test::CliResult fit =
-      run(with_layout({"fit", file.string(), "--model", "linear", "--no-history"}));
+      run(test::with_plant_layout({"fit", file.string(), "--model", "linear", "--no-history"}));
   INFO(fit.out);
   CHECK(fit.status == 3);
   CHECK(fit.out.find("where it fails: nowhere to say (no stable model") != std::string::npos);
   CHECK(fit.out.find("residual RMS") == std::string::npos);
-  const test::CliResult diag = run(with_layout({"diagnose", file.string(), "--no-history"}));
+  const test::CliResult diag =
+      run(test::with_plant_layout({"diagnose", file.string(), "--no-history", "--keep-lead-in"}));
   INFO(diag.out);
   CHECK(diag.status == 0);
   CHECK(diag.out.find("residual:  none (no stable model") != std::string::npos);
@@ -309,8 +303,8 @@ TEST_CASE("sweep --reports: a level whose `linear` has no stable part climbs fro
   const fs::path pages = kTmp / "pages-nostable";
   fs::remove_all(pages);
   const std::string out = (kTmp / "nostable.json").string();
-  const test::CliResult r =
-      run(with_layout({"sweep", file.string(), "--json", out, "--reports", pages.string()}));
+  const test::CliResult r = run(test::with_plant_layout(
+      {"sweep", file.string(), "--json", out, "--reports", pages.string(), "--keep-lead-in"}));
   INFO(r.out);
   REQUIRE(r.status == 0);
   const nlohmann::json l = read_json(out)["loops"][0];
@@ -336,6 +330,53 @@ TEST_CASE("sweep --reports: a level whose `linear` has no stable part climbs fro
   // The level's rate gain is small (4e-4 PV/s per OP unit): significant digits, not "0.000".
   CHECK(page.find("integrator: rate_gain 0.000 ") == std::string::npos);
   CHECK(page.find(" PV/s per OP<br>") != std::string::npos);
+  fs::remove_all(pages);
+}
+
+// FIC20102 of 26 Dec 2024 (labelled sticky) rests for 95 minutes; then the set point steps down
+// twice, OP winds 2 % while PV stays put, and PV drops at once: a stuck valve that slips. On the
+// whole record the noise of the rest outweighs it; from a little before OP moves, the climb finds
+// He's stiction with a band of about the 2 % OP wound.
+TEST_CASE("sweep --reports: a record at rest until its last half hour is judged after its rest") {
+  const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
+                        "stic_2411FIC20102_20241226_0953_Stick1=0.681163.txt";
+  const std::string dj = (kTmp / "rest.json").string();
+  const test::CliResult diag = run(
+      test::with_plant_layout({"diagnose", file.string(), "--auto", "--no-history", "--json", dj}),
+      600.0);
+  INFO(diag.out);
+  REQUIRE(diag.status == 0);
+  CHECK(diag.out.find("note: the analysis starts at t = 5290 s (sample 530 of 751): before t = "
+                      "5730 s OP holds within a quarter of its span") != std::string::npos);
+  CHECK(diag.out.find("verdict:   stiction") != std::string::npos);
+  const nlohmann::json d = read_json(dj);
+  CHECK(d["analysed_from_s"].get<double>() == 5290.0);
+  CHECK(d["stiction_percent"].get<double>() > 1.0);
+  CHECK(d["stiction_percent"].get<double>() < 3.0);
+  const test::CliResult whole = run(test::with_plant_layout({"diagnose", file.string(), "--auto",
+                                                             "--no-history", "--keep-lead-in"}),
+                                    600.0);
+  INFO(whole.out);
+  CHECK(whole.out.find("the analysis starts") == std::string::npos);
+  CHECK(whole.out.find("verdict:   no-valve-problem") != std::string::npos);
+
+  const fs::path pages = kTmp / "pages-rest";
+  fs::remove_all(pages);
+  const std::string out = (kTmp / "rest-sweep.json").string();
+  const test::CliResult r = run(
+      test::with_plant_layout({"sweep", file.string(), "--json", out, "--reports", pages.string()}),
+      600.0);
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  const nlohmann::json l = read_json(out)["loops"][0];
+  CHECK(l["verdict"] == "stiction");
+  CHECK(l["analysed_from_s"].get<double>() == 5290.0);
+  CHECK(l["health"]["samples"] == 751);  // the loop's figures cover the whole window
+  CHECK(l["reason"].get<std::string>().find("The analysis starts at t = 5290 s") == 0);
+  std::ifstream f(l["report"].get<std::string>());
+  REQUIRE(f);
+  const std::string page((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  CHECK(page.find("the analysis starts at t = 5290 s") != std::string::npos);
   fs::remove_all(pages);
 }
 
