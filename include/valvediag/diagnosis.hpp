@@ -57,6 +57,9 @@ struct DiagnoseOptions {
   // The valve-travel test, run when the valve position is given: its OP span (op_range)
   // turns friction into % of travel, so set it to the valve's OP range when OP is not 0..100.
   ValveTravelOptions valve_travel;
+  // Time of the first sample, s: the conclusion names intervals at time_origin_s + k Ts (the
+  // data's own time when a record was cut after a quiet lead-in, or its time axis starts late).
+  double time_origin_s = 0.0;
 };
 
 struct DiagnosisStep {

@@ -39,9 +39,10 @@ QuietLeadIn quiet_lead_in(const std::vector<double>& op, const QuietLeadInOption
 // The samples [begin, size) of every series of d (t keeps its values).
 LoopData drop_lead_in(const LoopData& d, std::size_t begin);
 
-// One sentence for notes and reasons, e.g. "the analysis starts at t = 5290 s (sample 529 of
-// 751): OP holds within a quarter of its span of its starting level before t = 5700 s, which
-// shows nothing of the valve". t: the record's time stamps.
-std::string describe_lead_in(const QuietLeadIn& q, const std::vector<double>& t);
+// One sentence for notes and reasons, e.g. "the analysis starts at t = 5290 s (sample 530 of
+// 751): before t = 5730 s OP holds within a quarter of its span of where it started, which shows
+// nothing of the valve". t: the record's time stamps; times are given as t - origin.
+std::string describe_lead_in(const QuietLeadIn& q, const std::vector<double>& t,
+                             double origin = 0.0);
 
 }  // namespace valvediag

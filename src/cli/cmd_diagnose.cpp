@@ -74,6 +74,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     DiagnoseOptions o;
     o.valve_travel.op_range = range;
+    o.time_origin_s = d.t.front();  // the conclusion's times on the data's axis, as the tables'
     o.validation_fraction = a->validate;
     o.min_gain_percent = a->min_gain;
     o.candidates = a->candidates;

@@ -137,7 +137,8 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   // The diagnosis covers the record after a quiet lead-in: its page shows that part.
   const QuietLeadIn lead = lead_in_left_out(d, opt);
   const LoopData shown_data = lead.cut() && !dg.steps.empty() ? drop_lead_in(d, lead.begin) : d;
-  if (lead.cut() && !dg.steps.empty()) notes.push_back(describe_lead_in(lead, d.t));
+  if (lead.cut() && !dg.steps.empty())
+    notes.push_back(describe_lead_in(lead, d.t));  // on the page's time axis
   if (!a.reports.empty() && (!dg.steps.empty() || d.size() >= 2)) {
     // The loop's page: the climbed ladder's top model, where it fails, the findings; without a
     // model (not-enough-data, or no stable model on the ladder), why, the loop-health figures and

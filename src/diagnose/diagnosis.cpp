@@ -357,7 +357,8 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   return step;
 }
 
-std::string conclusion_of(const DiagnosisStep& s, const std::vector<double>& t_axis, double Ts,
+// origin: the time of sample 0, s.
+std::string conclusion_of(const DiagnosisStep& s, double Ts, double origin,
                           const std::string& why) {
   if (s.fit.status == ModelFitStatus::NoStableModel)
     return why + " `" + to_string(s.fit.spec) +
@@ -370,8 +371,8 @@ std::string conclusion_of(const DiagnosisStep& s, const std::vector<double>& t_a
   if (r.noise_level > 0) c += strprintf(" (%.1f x)", r.rms / r.noise_level);
   if (!r.intervals.empty()) {
     const auto& iv = r.intervals.front();
-    const double t0 = t_axis.empty() ? iv.begin * Ts : t_axis[iv.begin];
-    const double t1 = t_axis.empty() ? (iv.end - 1) * Ts : t_axis[iv.end - 1];
+    const double t0 = origin + static_cast<double>(iv.begin) * Ts;
+    const double t1 = origin + static_cast<double>(iv.end - 1) * Ts;
     c += strprintf("; the largest unexplained interval is t %.0f .. %.0f s", t0, t1) +
          strprintf(" (%.0f %% of the remaining error)", 100 * iv.share);
   }
@@ -508,7 +509,7 @@ Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, d
   d.whole_record = whole_record_of(u, y, Ts, d, opt);
   d.conclusion = with_whole_record(
       with_limit_cycle(
-          conclusion_of(d.last(), {}, Ts,
+          conclusion_of(d.last(), Ts, opt.time_origin_s,
                         supported
                             ? "The most likely missing effect is `" + f.front().effect + "`."
                             : "No candidate effect improves the model by a meaningful margin."),
@@ -570,7 +571,8 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
   d.limit_cycle = limit_cycle_of(u, y, Ts, d);
   d.whole_record = whole_record_of(u, y, Ts, d, opt);
   d.conclusion = with_whole_record(
-      with_limit_cycle(conclusion_of(d.last(), {}, Ts, why), d.limit_cycle), d.whole_record);
+      with_limit_cycle(conclusion_of(d.last(), Ts, opt.time_origin_s, why), d.limit_cycle),
+      d.whole_record);
   if (!joint.empty()) d.conclusion = joint + " " + d.conclusion;
   if (!restart.empty()) d.conclusion = restart + " " + d.conclusion;
   return d;

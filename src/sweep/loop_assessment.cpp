@@ -140,6 +140,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   Diagnosis dg;
   DiagnoseOptions dopt = opt.diagnose;
   dopt.valve_travel.op_range = opt.range;
+  dopt.time_origin_s = a.analysed_from_s;  // the reason's times count from the record's start
   try {
     dg = diagnose_auto(x.op, x.pv, x.mv, x.sample_period(), ModelSpec{}, dopt);
   } catch (const std::invalid_argument& e) {
@@ -170,7 +171,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   a.slip_jump_percent = fr.jump_percent;
   a.reason = dg.conclusion;
   if (lead.cut()) {
-    std::string s = describe_lead_in(lead, d.t);
+    std::string s = describe_lead_in(lead, d.t, d.t.front());
     s[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(s[0])));
     a.reason = s + ". " + a.reason;
   }

@@ -42,9 +42,9 @@ LoopData drop_lead_in(const LoopData& d, std::size_t begin) {
   return r;
 }
 
-std::string describe_lead_in(const QuietLeadIn& q, const std::vector<double>& t) {
+std::string describe_lead_in(const QuietLeadIn& q, const std::vector<double>& t, double origin) {
   if (!q.cut() || q.begin >= t.size()) return {};
-  const double t0 = t.front();
+  const double t0 = origin;
   char buf[320];
   std::snprintf(buf, sizeof buf,
                 "the analysis starts at t = %.0f s (sample %zu of %zu): before t = %.0f s OP "

@@ -243,6 +243,28 @@ TEST_CASE("a loop with no valve problem is not diagnosed with stiction") {
   }
 }
 
+// The conclusion names its worst interval on the data's time axis: a record cut after a quiet
+// lead-in (quiet_lead_in.hpp) starts late, and its sample 0 is not t = 0.
+TEST_CASE("the conclusion's interval times count from time_origin_s") {
+  const LoopData d = run_scenario(scenario_by_name("deadband"), 1, 0);
+  DiagnoseOptions o;
+  o.candidates = {"deadband"};  // one trial: only the conclusion is under test
+  auto interval_start = [](const std::string& c) {
+    const auto at = c.find("the largest unexplained interval is t ");
+    REQUIRE(at != std::string::npos);  // linear leaves the backlash unexplained
+    return std::stod(c.substr(at + 38));
+  };
+  const Diagnosis from0 = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("linear"), o);
+  o.time_origin_s = 5000.0;
+  const Diagnosis late = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("linear"), o);
+  INFO(from0.conclusion);
+  INFO(late.conclusion);
+  const double t0 = interval_start(from0.conclusion);
+  CHECK(t0 >= 0.0);
+  CHECK(t0 < d.t.back());
+  CHECK(interval_start(late.conclusion) == doctest::Approx(t0 + 5000.0));
+}
+
 TEST_CASE("--auto climbs to the hidden effect and stops") {
   const LoopData data = run_scenario(scenario_by_name("paper-ex1"), 1, 0);
   const Diagnosis d =

@@ -79,9 +79,11 @@ TEST_CASE("quiet lead-in: drop_lead_in keeps every series aligned and says where
   QuietLeadIn q;
   q.begin = 4;
   q.departure = 6;
-  CHECK(describe_lead_in(q, d.t) ==
+  CHECK(describe_lead_in(q, d.t, 100.0) ==
         "the analysis starts at t = 40 s (sample 5 of 10): before t = 60 s OP holds within a "
         "quarter of its span of where it started, which shows nothing of the valve");
+  // On the data's own axis by default.
+  CHECK(describe_lead_in(q, d.t).find("starts at t = 140 s") != std::string::npos);
   CHECK(describe_lead_in(QuietLeadIn{}, d.t).empty());
 }
 
