@@ -53,8 +53,9 @@ struct LoopAssessment {
   // Where the diagnosis started, s after the record's first sample: > 0 when a quiet lead-in
   // was left out (quiet_lead_in.hpp); the loop-health figures cover the whole record.
   double analysed_from_s = 0.0;
-  std::string error;   // the analysis failed: exception text, timeout, crash
-  std::string report;  // the loop's HTML report, when one was written
+  QuietLeadIn lead_in;  // the lead-in left out, in samples of the record (not in the JSON)
+  std::string error;    // the analysis failed: exception text, timeout, crash
+  std::string report;   // the loop's HTML report, when one was written
 };
 
 // The whole assessment of one record. Throws only for programming errors; bad or short data

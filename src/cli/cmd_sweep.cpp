@@ -135,7 +135,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   Diagnosis dg;
   LoopAssessment r = assess_loop(d, job.name, opt, &dg);
   // The diagnosis covers the record after a quiet lead-in: its page shows that part.
-  const QuietLeadIn lead = lead_in_left_out(d, opt);
+  const QuietLeadIn& lead = r.lead_in;
   const LoopData shown_data = lead.cut() && !dg.steps.empty() ? drop_lead_in(d, lead.begin) : d;
   if (lead.cut() && !dg.steps.empty())
     notes.push_back(describe_lead_in(lead, d.t));  // on the page's time axis

@@ -133,7 +133,8 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
     a.verdict = "not-enough-data";
     return finish();
   }
-  const QuietLeadIn lead = lead_in_left_out(d, opt);
+  a.lead_in = lead_in_left_out(d, opt);
+  const QuietLeadIn& lead = a.lead_in;
   const LoopData part = lead.cut() ? drop_lead_in(d, lead.begin) : LoopData{};
   const LoopData& x = lead.cut() ? part : d;  // what the diagnosis sees
   if (lead.cut()) a.analysed_from_s = d.t[lead.begin] - d.t.front();
