@@ -86,7 +86,8 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
 // stiction band in % of travel / 2, at most 3.
 double severity(const LoopAssessment& a);
 
-// The quiet lead-in assess_loop leaves out of d (none with opt.keep_lead_in).
+// The quiet lead-in assess_loop leaves out of d (none with opt.keep_lead_in): quiet_lead_in(),
+// unless the part after it fails unusable_reason() where the whole record passes.
 QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt);
 
 // Highest severity first; ties by stiction size, then name.

@@ -64,12 +64,8 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     const LoopData whole = load_data(a->data, notes);
     check_identifiable_data(whole, 200, "a diagnosis");
     // The same part of the record a sweep diagnoses (quiet_lead_in.hpp).
-    AssessOptions as;
-    as.keep_lead_in = a->keep_lead_in;
-    const QuietLeadIn lead = lead_in_left_out(whole, as);
-    const LoopData d = lead.cut() ? drop_lead_in(whole, lead.begin) : whole;
-    if (lead.cut())
-      notes.push_back(describe_lead_in(lead, whole.t) + " (--keep-lead-in analyses it all)");
+    const AnalysedPart part = analysed_part(whole, a->keep_lead_in, range, notes);
+    const LoopData& d = part.data;
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     DiagnoseOptions o;
@@ -98,7 +94,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       };
       j["stiction_percent"] = number(fr.band_percent);
       j["slip_jump_percent"] = number(fr.jump_percent);
-      j["analysed_from_s"] = lead.cut() ? whole.t[lead.begin] - whole.t.front() : 0.0;
+      j["analysed_from_s"] = part.from_s;
       write_text(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }

@@ -87,7 +87,7 @@ void add_report(CLI::App& app, int& exit_code) {
     std::string model, out, gnuplot;
     double validate = 0.3;
     double timeout = 30.0;
-    bool no_diagnose = false, no_history = false, no_plots = false;
+    bool no_diagnose = false, no_history = false, no_plots = false, keep_lead_in = false;
     std::string op_range;
   };
   auto a = std::make_shared<Args>();
@@ -104,6 +104,10 @@ void add_report(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_flag("--no-diagnose", a->no_diagnose,
                 "leave out the diagnosis (trial fits of every missing effect; takes seconds)")
+      ->group(g);
+  cmd->add_flag("--keep-lead-in", a->keep_lead_in,
+                "fit and diagnose the whole record even when OP holds still for most of it "
+                "before the loop moves (by default that lead-in is left out, as in diagnose)")
       ->group(g);
   cmd->add_flag("--no-history", a->no_history,
                 "do not add this fit to the model history next to the data")
@@ -140,8 +144,12 @@ void add_report(CLI::App& app, int& exit_code) {
     }
 
     std::vector<std::string> notes;
-    const LoopData d = load_data(a->data, notes);
-    check_identifiable_data(d, 200, "a report");
+    const LoopData whole = load_data(a->data, notes);
+    check_identifiable_data(whole, 200, "a report");
+    // The part of the record diagnose and a sweep analyse (quiet_lead_in.hpp), so that the
+    // page agrees with the diagnose command it quotes.
+    const AnalysedPart part = analysed_part(whole, a->keep_lead_in, range, notes);
+    const LoopData& d = part.data;
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     const std::string history = history_path_for(name);
@@ -165,6 +173,7 @@ void add_report(CLI::App& app, int& exit_code) {
       DiagnoseOptions o;
       o.validation_fraction = a->validate;
       o.valve_travel.op_range = range;
+      o.time_origin_s = d.t.front();  // as diagnose: the conclusion's times on the data's axis
       try {
         diag = diagnose(d.op, d.pv, d.mv, Ts, *spec, o);
         fit = diag.steps.front().fit;
@@ -205,7 +214,8 @@ void add_report(CLI::App& app, int& exit_code) {
     c.where = &where;
     if (diagnosed) {
       c.diagnosis = &diag;
-      c.diagnosis_command = "valvediag diagnose " + name + " --model " + to_string(*spec);
+      c.diagnosis_command = "valvediag diagnose " + name + " --model " + to_string(*spec) +
+                            (a->keep_lead_in ? " --keep-lead-in" : "");
     }
     c.ladder = ladder;
     c.notes = notes;

@@ -6,6 +6,7 @@
 
 #include "commands.hpp"
 #include "isolated_mat_reader.hpp"
+#include "valvediag/loop_assessment.hpp"
 #include "valvediag/mat_reader.hpp"
 
 namespace valvediag::cli {
@@ -151,6 +152,17 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
 std::string data_name(const DataOptions& d) {
   if (!d.db.empty()) return d.db + "." + d.loop;
   return d.loop.empty() ? d.data : d.data + "." + d.loop;  // a loop inside a .mat file
+}
+
+AnalysedPart analysed_part(const LoopData& whole, bool keep_lead_in, const OpRange& range,
+                           std::vector<std::string>& notes) {
+  AssessOptions as;
+  as.keep_lead_in = keep_lead_in;
+  as.range = range;
+  const QuietLeadIn lead = lead_in_left_out(whole, as);
+  if (!lead.cut()) return {whole, 0.0};
+  notes.push_back(describe_lead_in(lead, whole.t) + " (--keep-lead-in analyses it all)");
+  return {drop_lead_in(whole, lead.begin), whole.t[lead.begin] - whole.t.front()};
 }
 
 }  // namespace valvediag::cli

@@ -43,6 +43,16 @@ OpRange parse_op_range(const std::string& spec);
 // A note when OP leaves `range` by more than 1 % of it (the figures in % of travel would be
 // wrong), "" otherwise.
 std::string op_range_note(const LoopData& d, const OpRange& range, bool given);
+// The part of `whole` that diagnose, report and a sweep analyse: from a little before OP moves
+// when it rests for most of the record (lead_in_left_out() in loop_assessment.hpp), else all of
+// it; a note in `notes` says where the analysis starts. from_s: that start, s after the record's
+// first sample (0: the whole record).
+struct AnalysedPart {
+  LoopData data;
+  double from_s = 0.0;
+};
+AnalysedPart analysed_part(const LoopData& whole, bool keep_lead_in, const OpRange& range,
+                           std::vector<std::string>& notes);
 // What the data is called in messages and which name its model history hangs off:
 // the file, "site.sqlite.FIC101" for a recorded loop, "runs.mat.runs(2)" for a loop of a .mat
 // file named with --loop.

@@ -113,7 +113,16 @@ QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt) {
   if (opt.keep_lead_in) return {};
   QuietLeadInOptions q;
   q.min_samples = opt.min_samples;
-  return quiet_lead_in(d.op, q);
+  const QuietLeadIn lead = quiet_lead_in(d.op, q);
+  if (!lead.cut()) return lead;
+  // The part must pass the usability checks by itself. When only the lead-in makes the record
+  // usable (OP reverses there, within its quarter of the span, and not after), the lead-in
+  // carries what the diagnosis needs: it is not quiet, so keep the whole record.
+  const LoopData part = drop_lead_in(d, lead.begin);
+  if (!unusable_reason(part, loop_health(part, opt.range), opt.min_samples).empty() &&
+      unusable_reason(d, loop_health(d, opt.range), opt.min_samples).empty())
+    return {};
+  return lead;
 }
 
 LoopAssessment assess_loop(const LoopData& d, const std::string& name, const AssessOptions& opt,

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/loop_health.hpp"
 #include "valvediag/quiet_lead_in.hpp"
 #include "valvediag/scenarios.hpp"
 
@@ -85,6 +86,48 @@ TEST_CASE("quiet lead-in: drop_lead_in keeps every series aligned and says where
   // On the data's own axis by default.
   CHECK(describe_lead_in(q, d.t).find("starts at t = 140 s") != std::string::npos);
   CHECK(describe_lead_in(QuietLeadIn{}, d.t).empty());
+}
+
+// A lead-in that holds OP within a quarter of its span but steps it back and forth: the
+// reversals that make the record usable are all there. Cut, the part after it would fail the
+// usability checks (one reversal), so lead_in_left_out() keeps the whole record; with the same
+// lead-in and reversals after the departure too, it cuts as quiet_lead_in() does.
+TEST_CASE("quiet lead-in: not left out when only the lead-in makes the record usable") {
+  auto record = [](bool moves_after) {
+    LoopData d;
+    double y = 50.0;
+    for (int k = 0; k < 1000; ++k) {
+      double u = 0;
+      if (k < 700)
+        u = (k / 50) % 2 == 0 ? 52.0 : 48.0;  // +-2 steps: 13 reversals, all in the lead-in
+      else if (k < 750)
+        u = 48.0 + 22.0 * (k - 700) / 50.0;  // then up to 70
+      else
+        u = moves_after && (k / 40) % 2 == 1 ? 64.0 : 70.0;
+      u += 0.02 * std::sin(1.3 * k);
+      y += (u - y) / 10.0;  // first-order process, tau 10 samples
+      d.t.push_back(k);
+      d.op.push_back(u);
+      d.pv.push_back(y + 0.05 * std::sin(2.1 * k));
+    }
+    return d;
+  };
+  const LoopData still = record(false);
+  const QuietLeadIn q = quiet_lead_in(still.op);
+  REQUIRE(q.cut());  // OP stays within 5.5 of 52 until sample 700 of 1000
+  const LoopData part = drop_lead_in(still, q.begin);
+  CAPTURE(q.begin);
+  CHECK(unusable_reason(still, loop_health(still)).empty());
+  CHECK(unusable_reason(part, loop_health(part)).find("OP reverses") == 0);
+  CHECK(!lead_in_left_out(still, AssessOptions{}).cut());
+
+  const LoopData moving = record(true);
+  const QuietLeadIn m = lead_in_left_out(moving, AssessOptions{});
+  CHECK(m.cut());
+  CHECK(m.begin == quiet_lead_in(moving.op).begin);
+  AssessOptions keep;
+  keep.keep_lead_in = true;
+  CHECK(!lead_in_left_out(moving, keep).cut());
 }
 
 namespace {

@@ -360,6 +360,25 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
   CHECK(whole.out.find("the analysis starts") == std::string::npos);
   CHECK(whole.out.find("verdict:   no-valve-problem") != std::string::npos);
 
+  // `report` analyses the same part as the diagnose command its page quotes, in both modes.
+  for (const bool keep : {false, true}) {
+    CAPTURE(keep);
+    const std::string page = (kTmp / "rest-report.html").string();
+    std::vector<std::string> args{"report",       file.string(), "--model", "linear",
+                                  "--no-history", "--no-plots",  "--out",   page};
+    if (keep) args.push_back("--keep-lead-in");
+    const test::CliResult rep = run(test::with_plant_layout(args), 600.0);
+    INFO(rep.out);
+    REQUIRE(rep.status == 0);
+    CHECK((rep.out.find("note: the analysis starts at t = 5290 s") != std::string::npos) == !keep);
+    CHECK(rep.out.find(keep ? "verdict:   no-valve-problem" : "verdict:   stiction") !=
+          std::string::npos);
+    std::ifstream in(page);
+    const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    CHECK((html.find("the analysis starts at t = 5290 s") != std::string::npos) == !keep);
+    CHECK((html.find("--model linear --keep-lead-in") != std::string::npos) == keep);
+  }
+
   const fs::path pages = kTmp / "pages-rest";
   fs::remove_all(pages);
   const std::string out = (kTmp / "rest-sweep.json").string();
