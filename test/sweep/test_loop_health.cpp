@@ -119,6 +119,20 @@ TEST_CASE("unusable records are named with what is wrong") {
   LoopData ramp = good;  // one move up: no reversal
   for (std::size_t k = 0; k < ramp.size(); ++k) ramp.op[k] = 20 + 0.03 * static_cast<double>(k);
   CHECK(unusable_reason(ramp, loop_health(ramp)).find("OP reverses 0 times") == 0);
+  // Up and down: one reversal, half a loop of the hysteresis. Up, down and up again closes it.
+  LoopData tent = good, zigzag = good;
+  const double n = static_cast<double>(good.size());
+  for (std::size_t k = 0; k < good.size(); ++k) {
+    const double x = static_cast<double>(k) / n;
+    tent.op[k] = 20 + 40 * (1 - std::abs(2 * x - 1));
+    zigzag.op[k] = 20 + 40 * std::abs(std::fmod(3 * x, 2.0) - 1);
+  }
+  CHECK(unusable_reason(tent, loop_health(tent))
+            .find("OP reverses 1 times in the window; at least 2 "
+                  "(up, down and up again)") == 0);
+  CHECK(std::round(loop_health(zigzag).op_reversals_per_hour * loop_health(zigzag).duration_s /
+                   3600.0) == 2);
+  CHECK(unusable_reason(zigzag, loop_health(zigzag)).find("OP reverses") == std::string::npos);
 
   LoopData op_only = good;  // a .mat loop of OP alone (the stiction database's benchmark)
   op_only.pv.clear();

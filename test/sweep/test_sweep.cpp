@@ -90,6 +90,22 @@ TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean 
   CHECK(v.front().loop == "FIC104");
 }
 
+// The paper's Example 1 at seed 8 reverses OP only 3 times in 3000 samples: enough to close the
+// valve's hysteresis loop and size the band (fs 8.4 % of travel). It was not-enough-data when 4
+// reversals were asked for.
+TEST_CASE("assess_loop: a sticky valve whose OP reverses 3 times is judged and sized") {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 8, 3000);
+  const LoopHealth h = loop_health(d);
+  CHECK(std::round(h.op_reversals_per_hour * h.duration_s / 3600.0) == 3);
+  CHECK(unusable_reason(d, h).empty());
+#ifndef VALVEDIAG_SANITIZED  // the diagnosis's figures, not the path (tested above)
+  const LoopAssessment a = assess_loop(d, "FIC101");
+  INFO(a.reason);
+  CHECK(a.verdict == "stiction");
+  CHECK(a.stiction_percent == doctest::Approx(8.4).epsilon(0.1));
+#endif
+}
+
 TEST_CASE("results survive their JSON round trip; rank puts the worst valve first") {
   LoopAssessment a;
   a.loop = "FIC101";
