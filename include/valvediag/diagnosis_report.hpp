@@ -10,8 +10,13 @@
 
 namespace valvediag {
 
-std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t);
-nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t);
+// `unusable`: why the record cannot be judged (unusable_reason() in loop_health.hpp), "" when it
+// can. A sweep gives such a record `not-enough-data` without fitting it; so does the verdict here,
+// with the reason, while the fits are still shown.
+std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
+                             const std::string& unusable = "");
+nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
+                              const std::string& unusable = "");
 // The limit-cycle test's figures (limit_cycle.hpp) as `diagnose --json` and the sweep write them,
 // and back (missing keys keep their defaults).
 nlohmann::json limit_cycle_json(const LimitCycle& c);

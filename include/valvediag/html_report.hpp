@@ -31,10 +31,12 @@ struct ReportContent {
   const ResidualAnalysis* where = nullptr;  // where it fails (nullptr: not shown)
   const Diagnosis* diagnosis = nullptr;     // nullptr: not run (the page says so)
   std::string diagnosis_command;            // how it was run, e.g. "diagnose --auto from linear"
-  std::vector<HistoryEntry> ladder;         // the data's model history
-  std::vector<std::string> notes;           // shown under the header (data notes)
-  std::string generated;                    // date shown; empty: now (UTC)
-  std::string generator = "valvediag";      // program and version in the footer
+  std::string unusable;  // why a sweep would not judge the record (loop_health.hpp), "" if it
+                         // would: the verdict is then not-enough-data, the diagnosis still shown
+  std::vector<HistoryEntry> ladder;     // the data's model history
+  std::vector<std::string> notes;       // shown under the header (data notes)
+  std::string generated;                // date shown; empty: now (UTC)
+  std::string generator = "valvediag";  // program and version in the footer
 };
 
 struct ReportOptions {

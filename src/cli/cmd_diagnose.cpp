@@ -65,6 +65,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     check_identifiable_data(whole, 200, "a diagnosis");
     // The same part of the record a sweep diagnoses (quiet_lead_in.hpp).
     const AnalysedPart part = analysed_part(whole, a->keep_lead_in, range, notes);
+    const std::string& unusable = part.unusable;
     const LoopData& d = part.data;
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
@@ -78,9 +79,10 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     const double Ts = d.sample_period();
     Diagnosis r = a->autoclimb ? diagnose_auto(d.op, d.pv, d.mv, Ts, spec, o)
                                : diagnose(d.op, d.pv, d.mv, Ts, spec, o);
-    std::cout << format_diagnosis(r, d.t);
-    // The stiction size the sweep reports, for one loop without a site config.
-    const FrictionSize fr = friction_size(r, d.op, d.pv, range);
+    std::cout << format_diagnosis(r, d.t, unusable);
+    // The stiction size the sweep reports, for one loop without a site config (none when the
+    // record cannot be judged).
+    const FrictionSize fr = unusable.empty() ? friction_size(r, d.op, d.pv, range) : FrictionSize{};
     if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent))
       std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%\n",
                   fr.band_percent, fr.jump_percent);
@@ -88,7 +90,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       std::printf("stiction:  %.2f %% of valve travel (apparent, from the limit cycle)\n",
                   fr.band_percent);
     if (!a->json.empty()) {
-      nlohmann::json j = diagnosis_json(r, d.t);
+      nlohmann::json j = diagnosis_json(r, d.t, unusable);
       auto number = [](double v) {
         return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
       };

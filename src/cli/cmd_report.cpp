@@ -149,6 +149,7 @@ void add_report(CLI::App& app, int& exit_code) {
     // The part of the record diagnose and a sweep analyse (quiet_lead_in.hpp), so that the
     // page agrees with the diagnose command it quotes.
     const AnalysedPart part = analysed_part(whole, a->keep_lead_in, range, notes);
+    const std::string& unusable = part.unusable;
     const LoopData& d = part.data;
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
@@ -217,6 +218,7 @@ void add_report(CLI::App& app, int& exit_code) {
       c.diagnosis_command = "valvediag diagnose " + name + " --model " + to_string(*spec) +
                             (a->keep_lead_in ? " --keep-lead-in" : "");
     }
+    c.unusable = unusable;
     c.ladder = ladder;
     c.notes = notes;
     c.generator = "valvediag report";
@@ -226,7 +228,10 @@ void add_report(CLI::App& app, int& exit_code) {
                   to_string(fit.spec).c_str(), fit.fitness_percent, fit.validation_fitness_percent);
     else
       std::printf("model:     %s: no stable model on this record\n", to_string(fit.spec).c_str());
-    if (diagnosed) std::printf("verdict:   %s\n", verdict(diag).c_str());
+    if (diagnosed && unusable.empty())
+      std::printf("verdict:   %s\n", verdict(diag).c_str());
+    else if (diagnosed)
+      std::printf("verdict:   not-enough-data: %s\n", unusable.c_str());
     std::fflush(stdout);
     std::cout << report_file_summary(out, r);
     exit_code = kOk;

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <utility>
 
 #include "commands.hpp"
 #include "isolated_mat_reader.hpp"
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/loop_health.hpp"
 #include "valvediag/mat_reader.hpp"
 
 namespace valvediag::cli {
@@ -156,13 +158,17 @@ std::string data_name(const DataOptions& d) {
 
 AnalysedPart analysed_part(const LoopData& whole, bool keep_lead_in, const OpRange& range,
                            std::vector<std::string>& notes) {
+  // The data check a sweep makes before it fits anything: the same verdict for one loop.
+  std::string unusable = unusable_reason(whole, loop_health(whole, range));
+  if (!unusable.empty()) notes.push_back("a sweep would not judge this record: " + unusable);
   AssessOptions as;
   as.keep_lead_in = keep_lead_in;
   as.range = range;
   const QuietLeadIn lead = lead_in_left_out(whole, as);
-  if (!lead.cut()) return {whole, 0.0};
+  if (!lead.cut()) return {whole, 0.0, std::move(unusable)};
   notes.push_back(describe_lead_in(lead, whole.t) + " (--keep-lead-in analyses it all)");
-  return {drop_lead_in(whole, lead.begin), whole.t[lead.begin] - whole.t.front()};
+  return {drop_lead_in(whole, lead.begin), whole.t[lead.begin] - whole.t.front(),
+          std::move(unusable)};
 }
 
 }  // namespace valvediag::cli

@@ -28,7 +28,8 @@ nlohmann::json num_json(double v) {
 
 }  // namespace
 
-std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
+std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
+                             const std::string& unusable) {
   std::ostringstream o;
   if (d.steps.size() > 1) {
     o << "ladder (climbed with --auto):\n";
@@ -88,7 +89,11 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t) {
   if (d.limit_cycle.oscillating) o << "limit cycle: " << d.limit_cycle.summary << "\n";
   if (d.whole_record.tested) o << "whole record: " << d.whole_record.summary << "\n";
   if (!d.valve_travel.summary.empty()) o << "valve travel: " << d.valve_travel.summary << "\n";
-  o << "verdict:   " << verdict(d) << "\n";
+  if (unusable.empty())
+    o << "verdict:   " << verdict(d) << "\n";
+  else
+    o << "verdict:   not-enough-data: " << unusable
+      << " (the fits above are shown, not judged; a sweep does not fit such a record)\n";
   o << d.conclusion << "\n";
   return o.str();
 }
@@ -203,7 +208,8 @@ ValveTravel valve_travel_from_json(const nlohmann::json& j) {
   return v;
 }
 
-nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) {
+nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
+                              const std::string& unusable) {
   using nlohmann::json;
   const auto& s = d.last();
   json j;
@@ -219,7 +225,8 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t) 
     eff.push_back({{"effect", e.name}, {"variant", e.variant}, {"parameters", p}});
   }
   j["effects"] = eff;
-  j["verdict"] = verdict(d);
+  j["verdict"] = unusable.empty() ? verdict(d) : "not-enough-data";
+  j["unusable_reason"] = unusable;
   j["limit_cycle"] = limit_cycle_json(d.limit_cycle);
   j["whole_record"] = whole_record_json(d.whole_record);
   j["valve_travel"] = valve_travel_json(d.valve_travel);

@@ -704,7 +704,8 @@ void record_rows(std::ostringstream& o, const LoopData& d, const std::string& na
 }
 
 std::string verdict_of(const ReportContent& c) {
-  return c.diagnosis != nullptr && !c.diagnosis->steps.empty() ? verdict(*c.diagnosis) : "";
+  if (c.diagnosis == nullptr || c.diagnosis->steps.empty()) return "";
+  return c.unusable.empty() ? verdict(*c.diagnosis) : "not-enough-data";
 }
 
 void header_section(std::ostringstream& o, const ReportContent& c) {
@@ -739,7 +740,12 @@ void header_section(std::ostringstream& o, const ReportContent& c) {
           " (simulated output, eq 20)");
   const std::string v = verdict_of(c);
   row(o, "verdict",
-      v.empty() ? std::string("not diagnosed") : "<span class=\"verdict\">" + e(v) + "</span>");
+      v.empty() ? std::string("not diagnosed")
+                : "<span class=\"verdict\">" + e(v) + "</span>" +
+                      (c.unusable.empty() ? std::string()
+                                          : ": " + e(c.unusable) +
+                                                " (the fits are shown, not judged; a sweep does "
+                                                "not fit such a record)"));
   if (c.diagnosis != nullptr && c.diagnosis->limit_cycle.oscillating)
     row(o, "limit cycle", e(c.diagnosis->limit_cycle.summary));
   if (c.diagnosis != nullptr && c.diagnosis->whole_record.tested)
@@ -879,7 +885,7 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
       << e(s.findings.front().effect)
       << "</code>, gains too little to be worth its parameters.</p>\n";
   }
-  o << "<p>Verdict: <span class=\"verdict\">" << e(verdict(d)) << "</span>. " << e(d.conclusion)
+  o << "<p>Verdict: <span class=\"verdict\">" << e(verdict_of(c)) << "</span>. " << e(d.conclusion)
     << "</p>\n</section>\n";
 }
 

@@ -351,6 +351,7 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
   CHECK(diag.out.find("verdict:   stiction") != std::string::npos);
   const nlohmann::json d = read_json(dj);
   CHECK(d["analysed_from_s"].get<double>() == 5290.0);
+  CHECK(d["unusable_reason"] == "");  // a sweep judges it too
   CHECK(d["stiction_percent"].get<double>() > 1.0);
   CHECK(d["stiction_percent"].get<double>() < 3.0);
   const test::CliResult whole = run(test::with_plant_layout({"diagnose", file.string(), "--auto",
@@ -397,6 +398,50 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
   const std::string page((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   CHECK(page.find("the analysis starts at t = 5290 s") != std::string::npos);
   fs::remove_all(pages);
+}
+
+// AIC90201 of 2 Oct (labelled sticky): OP stays within 0.08 % of its range, so a sweep does not
+// fit it (not-enough-data). diagnose --auto --json, the one-loop check the issue asks for, and
+// report give the same verdict and reason, while they still show their fits.
+TEST_CASE("diagnose and report: a record a sweep refuses is not-enough-data there too") {
+  const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
+                        "stic_2411AIC90201_1002_0004_Stick1=0.59209.txt";
+  const std::string sj = (kTmp / "idle-sweep.json").string();
+  const test::CliResult sw = run(test::with_plant_layout({"sweep", file.string(), "--json", sj}));
+  INFO(sw.out);
+  REQUIRE(sw.status == 0);
+  const nlohmann::json l = read_json(sj)["loops"][0];
+  REQUIRE(l["verdict"] == "not-enough-data");
+  const std::string reason = l["reason"];
+  CHECK(reason.find("OP does not move beyond its noise") == 0);
+
+  const std::string dj = (kTmp / "idle-diagnose.json").string();
+  const test::CliResult dg = run(
+      test::with_plant_layout({"diagnose", file.string(), "--auto", "--no-history", "--json", dj}),
+      600.0);
+  INFO(dg.out);
+  REQUIRE(dg.status == 0);
+  CHECK(dg.out.find("note: a sweep would not judge this record: " + reason) != std::string::npos);
+  CHECK(dg.out.find("verdict:   not-enough-data: " + reason) != std::string::npos);
+  CHECK(dg.out.find("ladder") != std::string::npos);  // the fits are still shown
+  CHECK(dg.out.find("stiction:  ") == std::string::npos);
+  const nlohmann::json d = read_json(dj);
+  CHECK(d["verdict"] == "not-enough-data");
+  CHECK(d["unusable_reason"] == reason);
+  CHECK(d["stiction_percent"].is_null());
+
+  const std::string page = (kTmp / "idle-report.html").string();
+  const test::CliResult rep =
+      run(test::with_plant_layout({"report", file.string(), "--model", "linear", "--no-history",
+                                   "--no-plots", "--out", page}),
+          600.0);
+  INFO(rep.out);
+  REQUIRE(rep.status == 0);
+  CHECK(rep.out.find("verdict:   not-enough-data: " + reason) != std::string::npos);
+  std::ifstream in(page);
+  const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  CHECK(html.find("<span class=\"verdict\">not-enough-data</span>") != std::string::npos);
+  CHECK(html.find("<span class=\"verdict\">no-valve-problem</span>") == std::string::npos);
 }
 
 TEST_CASE("sweep: a loop over its time limit is stopped and reported; user errors exit 2") {
