@@ -87,8 +87,9 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
 double severity(const LoopAssessment& a);
 
 // The quiet lead-in assess_loop leaves out of d (none with opt.keep_lead_in): quiet_lead_in(),
-// unless the part after it fails unusable_reason() where the whole record passes.
-QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt);
+// unless the part after it fails unusable_reason() while the whole record passes it
+// (whole_usable: the caller's unusable_reason() of d was "").
+QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt, bool whole_usable);
 
 // Highest severity first; ties by stiction size, then name.
 void rank(std::vector<LoopAssessment>& loops);

@@ -22,5 +22,8 @@
 namespace valvediag {
 
 std::string verdict(const Diagnosis& d);
+// The same, or "not-enough-data" when `unusable` (unusable_reason() of the record) is not empty:
+// what diagnose and report say of a record a sweep would not fit, while showing their fits.
+std::string verdict(const Diagnosis& d, const std::string& unusable);
 
 }  // namespace valvediag

@@ -228,10 +228,9 @@ void add_report(CLI::App& app, int& exit_code) {
                   to_string(fit.spec).c_str(), fit.fitness_percent, fit.validation_fitness_percent);
     else
       std::printf("model:     %s: no stable model on this record\n", to_string(fit.spec).c_str());
-    if (diagnosed && unusable.empty())
-      std::printf("verdict:   %s\n", verdict(diag).c_str());
-    else if (diagnosed)
-      std::printf("verdict:   not-enough-data: %s\n", unusable.c_str());
+    if (diagnosed)
+      std::printf("verdict:   %s%s\n", verdict(diag, unusable).c_str(),
+                  unusable.empty() ? "" : (": " + unusable).c_str());
     std::fflush(stdout);
     std::cout << report_file_summary(out, r);
     exit_code = kOk;

@@ -164,7 +164,7 @@ AnalysedPart analysed_part(const LoopData& whole, bool keep_lead_in, const OpRan
   AssessOptions as;
   as.keep_lead_in = keep_lead_in;
   as.range = range;
-  const QuietLeadIn lead = lead_in_left_out(whole, as);
+  const QuietLeadIn lead = lead_in_left_out(whole, as, unusable.empty());
   if (!lead.cut()) return {whole, 0.0, std::move(unusable)};
   notes.push_back(describe_lead_in(lead, whole.t) + " (--keep-lead-in analyses it all)");
   return {drop_lead_in(whole, lead.begin), whole.t[lead.begin] - whole.t.front(),

@@ -89,11 +89,11 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   if (d.limit_cycle.oscillating) o << "limit cycle: " << d.limit_cycle.summary << "\n";
   if (d.whole_record.tested) o << "whole record: " << d.whole_record.summary << "\n";
   if (!d.valve_travel.summary.empty()) o << "valve travel: " << d.valve_travel.summary << "\n";
-  if (unusable.empty())
-    o << "verdict:   " << verdict(d) << "\n";
-  else
-    o << "verdict:   not-enough-data: " << unusable
-      << " (the fits above are shown, not judged; a sweep does not fit such a record)\n";
+  o << "verdict:   " << verdict(d, unusable);
+  if (!unusable.empty())
+    o << ": " << unusable << " (the fits above are shown, not judged; a sweep does not fit such a "
+      << "record)";
+  o << "\n";
   o << d.conclusion << "\n";
   return o.str();
 }
@@ -225,7 +225,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
     eff.push_back({{"effect", e.name}, {"variant", e.variant}, {"parameters", p}});
   }
   j["effects"] = eff;
-  j["verdict"] = unusable.empty() ? verdict(d) : "not-enough-data";
+  j["verdict"] = verdict(d, unusable);
   j["unusable_reason"] = unusable;
   j["limit_cycle"] = limit_cycle_json(d.limit_cycle);
   j["whole_record"] = whole_record_json(d.whole_record);

@@ -704,8 +704,8 @@ void record_rows(std::ostringstream& o, const LoopData& d, const std::string& na
 }
 
 std::string verdict_of(const ReportContent& c) {
-  if (c.diagnosis == nullptr || c.diagnosis->steps.empty()) return "";
-  return c.unusable.empty() ? verdict(*c.diagnosis) : "not-enough-data";
+  return c.diagnosis != nullptr && !c.diagnosis->steps.empty() ? verdict(*c.diagnosis, c.unusable)
+                                                               : "";
 }
 
 void header_section(std::ostringstream& o, const ReportContent& c) {

@@ -109,19 +109,17 @@ void rank(std::vector<LoopAssessment>& loops) {
   });
 }
 
-QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt) {
+QuietLeadIn lead_in_left_out(const LoopData& d, const AssessOptions& opt, bool whole_usable) {
   if (opt.keep_lead_in) return {};
   QuietLeadInOptions q;
   q.min_samples = opt.min_samples;
   const QuietLeadIn lead = quiet_lead_in(d.op, q);
-  if (!lead.cut()) return lead;
+  if (!lead.cut() || !whole_usable) return lead;
   // The part must pass the usability checks by itself. When only the lead-in makes the record
   // usable (OP reverses there, within its quarter of the span, and not after), the lead-in
   // carries what the diagnosis needs: it is not quiet, so keep the whole record.
   const LoopData part = drop_lead_in(d, lead.begin);
-  if (!unusable_reason(part, loop_health(part, opt.range), opt.min_samples).empty() &&
-      unusable_reason(d, loop_health(d, opt.range), opt.min_samples).empty())
-    return {};
+  if (!unusable_reason(part, loop_health(part, opt.range), opt.min_samples).empty()) return {};
   return lead;
 }
 
@@ -142,7 +140,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
     a.verdict = "not-enough-data";
     return finish();
   }
-  a.lead_in = lead_in_left_out(d, opt);
+  a.lead_in = lead_in_left_out(d, opt, true);  // the whole record passed the check above
   const QuietLeadIn& lead = a.lead_in;
   const LoopData part = lead.cut() ? drop_lead_in(d, lead.begin) : LoopData{};
   const LoopData& x = lead.cut() ? part : d;  // what the diagnosis sees

@@ -119,15 +119,15 @@ TEST_CASE("quiet lead-in: not left out when only the lead-in makes the record us
   CAPTURE(q.begin);
   CHECK(unusable_reason(still, loop_health(still)).empty());
   CHECK(unusable_reason(part, loop_health(part)).find("OP reverses") == 0);
-  CHECK(!lead_in_left_out(still, AssessOptions{}).cut());
+  CHECK(!lead_in_left_out(still, AssessOptions{}, true).cut());
 
   const LoopData moving = record(true);
-  const QuietLeadIn m = lead_in_left_out(moving, AssessOptions{});
+  const QuietLeadIn m = lead_in_left_out(moving, AssessOptions{}, true);
   CHECK(m.cut());
   CHECK(m.begin == quiet_lead_in(moving.op).begin);
   AssessOptions keep;
   keep.keep_lead_in = true;
-  CHECK(!lead_in_left_out(moving, keep).cut());
+  CHECK(!lead_in_left_out(moving, keep, true).cut());
 }
 
 namespace {

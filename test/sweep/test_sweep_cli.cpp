@@ -38,6 +38,13 @@ nlohmann::json read_json(const std::string& path) {
   return nlohmann::json::parse(f);
 }
 
+// A file written by the command under test (a report page), whole; it must exist.
+std::string read_text(const std::string& path) {
+  std::ifstream f(path);
+  REQUIRE(f);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
 const nlohmann::json* loop_in(const nlohmann::json& j, const std::string& name) {
   for (const auto& l : j["loops"])
     if (l["loop"] == name) return &l;
@@ -320,9 +327,7 @@ TEST_CASE("sweep --reports: a level whose `linear` has no stable part climbs fro
   CHECK(reason.find("`linear` has no stable linear part on this record, so the climb went on "
                     "from `integrator`") != std::string::npos);
   CHECK(reason.find("white-noise level") != std::string::npos);  // the last model's residual
-  std::ifstream f(l["report"].get<std::string>());
-  REQUIRE(f);
-  const std::string page((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const std::string page = read_text(l["report"].get<std::string>());
   CHECK(page.find("<tr><th>model</th><td><code>integrator") != std::string::npos);
   CHECK(page.find("<li><code>linear</code>: n/a estimation, n/a validation</li>") !=
         std::string::npos);
@@ -374,8 +379,7 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
     CHECK((rep.out.find("note: the analysis starts at t = 5290 s") != std::string::npos) == !keep);
     CHECK(rep.out.find(keep ? "verdict:   no-valve-problem" : "verdict:   stiction") !=
           std::string::npos);
-    std::ifstream in(page);
-    const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string html = read_text(page);
     CHECK((html.find("the analysis starts at t = 5290 s") != std::string::npos) == !keep);
     CHECK((html.find("--model linear --keep-lead-in") != std::string::npos) == keep);
   }
@@ -393,9 +397,7 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
   CHECK(l["analysed_from_s"].get<double>() == 5290.0);
   CHECK(l["health"]["samples"] == 751);  // the loop's figures cover the whole window
   CHECK(l["reason"].get<std::string>().find("The analysis starts at t = 5290 s") == 0);
-  std::ifstream f(l["report"].get<std::string>());
-  REQUIRE(f);
-  const std::string page((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const std::string page = read_text(l["report"].get<std::string>());
   CHECK(page.find("the analysis starts at t = 5290 s") != std::string::npos);
   fs::remove_all(pages);
 }
@@ -438,8 +440,7 @@ TEST_CASE("diagnose and report: a record a sweep refuses is not-enough-data ther
   INFO(rep.out);
   REQUIRE(rep.status == 0);
   CHECK(rep.out.find("verdict:   not-enough-data: " + reason) != std::string::npos);
-  std::ifstream in(page);
-  const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string html = read_text(page);
   CHECK(html.find("<span class=\"verdict\">not-enough-data</span>") != std::string::npos);
   CHECK(html.find("<span class=\"verdict\">no-valve-problem</span>") == std::string::npos);
 }
