@@ -2,18 +2,26 @@
 # Speed of the identification: full default grid at several N, beside a straightforward baseline
 # (dense relay matrix, cold NNLS per solve) built from the same code, in one run. Then the
 # recorder's load benchmark: 50 loops x OP/PV/SP at 10 Hz from the simulated PLC over loopback
-# for LOAD_SECONDS (default 60) s, and the SQLite insert rate. Then the sweep's throughput: six
-# simulated loops swept on one core (the baseline), with --jobs 1 (each loop's fits threaded over
-# the cores) and with one loop per core; SWEEP_REPS (default 3) runs each, medians and speed-ups. Arguments go to the first part.
+# for LOAD_SECONDS (default 60) s, and the SQLite insert rate. Then the ARX structure search that
+# every trial fit repeats, beside a plain scan of every structure (the same answer, checked;
+# SEARCH_REPS, default 5, runs). Then the sweep's throughput: six simulated loops swept on one
+# core (the baseline), with --jobs 1 (each loop's fits threaded over the cores) and with one loop
+# per core; SWEEP_REPS (default 3) runs each, medians and speed-ups. Arguments go to the first
+# part.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
-cmake --build build -j"$(nproc)" --target valvediag_bench valvediag_load_bench valvediag >/dev/null
+cmake --build build -j"$(nproc)" --target valvediag_bench valvediag_load_bench \
+  valvediag_structure_bench valvediag >/dev/null
 build/bench/valvediag_bench "$@"
 echo
 echo "== recorder load"
 build/bench/valvediag_load_bench "${LOAD_SECONDS:-60}"
+
+echo
+echo "== structure search"
+build/bench/valvediag_structure_bench "${SEARCH_REPS:-5}"
 
 echo
 cores=$(nproc)

@@ -43,7 +43,12 @@ struct LinearOptions {
   // Among structures within this many fitness points of the best: fewest na + nb, then the
   // smallest nk, then the smallest na (the core's rule; fitness alone prefers bigger models).
   double parsimony_percent = 0.1;
+  // The reference search: every structure fitted and simulated to the end, one after another,
+  // in a loop of general orders (the benchmark's baseline; fit() gives the same answer without).
+  bool plain_scan = false;
 };
+
+struct SseWindow;  // one simulation lane of the structure search (arx_estimator.cpp)
 
 struct LinearFit {
   bool ok = false;  // false: no structure gave a stable model
@@ -57,7 +62,8 @@ struct LinearFit {
 
 // The linear half of the separable problem for one output record. Everything that does not
 // depend on x (lagged outputs, drift basis, their Gram blocks) is built once; each fit() costs
-// one pass over x for the x-dependent Gram blocks plus one simulation per structure.
+// one pass over x for the x-dependent Gram blocks plus one simulation per structure, cut short
+// once the structure can no longer be chosen (the answer is the plain scan's, to the bit).
 // Thread-safe for concurrent fit() calls.
 class ArxEstimator {
  public:
@@ -89,9 +95,27 @@ class ArxEstimator {
  private:
   struct Gram;
   Gram x_blocks(const std::vector<double>& x) const;
-  LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x) const;
-  double window_sse(const LinearFit& f, const std::vector<double>& x) const;
+  // bound: a structure whose simulated-output SSE exceeds it cannot be chosen, so its simulation
+  // stops there and it comes back not ok (the grid's answer is unchanged).
+  LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x,
+                  double bound = std::numeric_limits<double>::infinity()) const;
+  // a, b and c (or the load's knots) of structure s by least squares; false when the normal
+  // equations fail or A is unstable.
+  bool coefficients(const Gram& g, const ArxStructure& s, LinearFit& f) const;
+  // Sets f's sse and fitness and marks it ok when sse is finite and within bound.
+  void score(LinearFit& f, double sse, double bound) const;
+  // The SSE over the estimation window; stops early, returning a value above bound, once the
+  // partial sum exceeds it (a sum of squares only grows).
+  double window_sse(const LinearFit& f, const std::vector<double>& x,
+                    double bound = std::numeric_limits<double>::infinity()) const;
+  // The same for n <= 4 fits of equal na and nb, simulated side by side; sse[i] for fs[i].
+  void window_sse4(const LinearFit* fs, std::size_t n, const std::vector<double>& x, double bound,
+                   double* sse) const;
+  // One lane over the buffers v and load (the caller's, reused between calls).
+  SseWindow window(const LinearFit& f, const std::vector<double>& x, double bound,
+                   std::vector<double>& v, std::vector<double>& load) const;
   LinearFit pick(const std::vector<LinearFit>& fits) const;  // the parsimony rule
+  LinearFit plain_fit(const Gram& g, const std::vector<double>& x, bool parsimony) const;
   LinearFit refine(const LinearFit& ls, const std::vector<double>& x, int iterations) const;
 
   std::vector<double> y_, w_;  // output and regression target (w = y or its difference)

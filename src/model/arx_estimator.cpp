@@ -1,16 +1,38 @@
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
+#include <tuple>
 
 #include "valvediag/effect_estimators.hpp"
 #include "valvediag/hammerstein.hpp"
 
 namespace valvediag {
 
+// One simulation of A v = B x + load over the estimation window, with its squared output error
+// (v integrated back to the output when the process integrates). NA, NB > 0 fix the orders at
+// compile time so the sums unroll; 0 takes them from the window. The operations and their order
+// are the same either way, so the sums are too.
+struct SseWindow {
+  const double* a;
+  std::size_t na;
+  const double* b;
+  std::size_t nb, nk;
+  const double *x, *y;
+  double* v;  // holds the outputs before t0; filled from t0 on
+  std::size_t t0, end;
+  double c;
+  const double* load;  // nullptr: the constant c
+  double ylev;         // integrating: the output before t0
+  double bound;        // stop once the sum exceeds it
+};
+
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
 
 bool stable(const std::vector<double>& a) {
   // Closed forms for the usual small orders (the companion eigen-solve costs more than the fit).
@@ -20,6 +42,60 @@ bool stable(const std::vector<double>& a) {
   if (a.size() == 1) return std::abs(a[0]) < 1.0 - 1e-9;
   if (a.size() == 2) return std::abs(a[1]) < 1.0 - 1e-9 && std::abs(a[0]) < 1.0 + a[1] - 1e-9;
   return is_stable(a);
+}
+
+template <std::size_t NA, std::size_t NB, bool Integrating>
+double simulated_sse(const SseWindow& w) {
+  const std::size_t na = NA > 0 ? NA : w.na, nb = NB > 0 ? NB : w.nb;
+  double ylev = w.ylev, sse = 0.0;
+  for (std::size_t t = w.t0; t < w.end; ++t) {
+    double s = w.load ? w.load[t] : w.c;
+    for (std::size_t i = 1; i <= na; ++i) s -= w.a[i - 1] * w.v[t - i];
+    for (std::size_t k = 1; k <= nb; ++k) s += w.b[k - 1] * w.x[t - w.nk - k];
+    w.v[t] = s;
+    double ys = s;
+    if constexpr (Integrating) ys = ylev += s;
+    sse += (ys - w.y[t]) * (ys - w.y[t]);
+    if (sse > w.bound) return sse;
+  }
+  return sse;
+}
+
+// Four windows of the same orders (na, nb, or NA, NB when > 0) at once, each lane exactly as
+// simulated_sse computes it. Stops when every lane's sum exceeds the bound.
+template <std::size_t NA, std::size_t NB, bool Integrating>
+void simulated_sse4(const std::array<SseWindow, 4>& w, double* out) {
+  const std::size_t na = NA > 0 ? NA : w[0].na, nb = NB > 0 ? NB : w[0].nb;
+  const double* y = w[0].y;
+  const double* x = w[0].x;
+  const double bound = w[0].bound;
+  std::array<double, 4> ylev{}, sse{};
+  ylev.fill(w[0].ylev);
+  for (std::size_t t = w[0].t0; t < w[0].end; ++t) {
+    for (std::size_t l = 0; l < 4; ++l) {
+      const SseWindow& q = w[l];
+      double s = q.load ? q.load[t] : q.c;
+      for (std::size_t i = 1; i <= na; ++i) s -= q.a[i - 1] * q.v[t - i];
+      for (std::size_t k = 1; k <= nb; ++k) s += q.b[k - 1] * x[t - q.nk - k];
+      q.v[t] = s;
+      double ys = s;
+      if constexpr (Integrating) ys = ylev[l] += s;
+      sse[l] += (ys - y[t]) * (ys - y[t]);
+    }
+    if ((t & 63) == 0 && sse[0] > bound && sse[1] > bound && sse[2] > bound && sse[3] > bound)
+      break;
+  }
+  for (std::size_t l = 0; l < 4; ++l) out[l] = sse[l];
+}
+
+// f.template operator()<NA, NB>() with the base grid's orders (1..2) unrolled, <0, 0> otherwise.
+template <class F>
+auto with_orders(std::size_t na, std::size_t nb, F&& f) {
+  if (na == 1 && nb == 1) return f.template operator()<1, 1>();
+  if (na == 1 && nb == 2) return f.template operator()<1, 2>();
+  if (na == 2 && nb == 1) return f.template operator()<2, 1>();
+  if (na == 2 && nb == 2) return f.template operator()<2, 2>();
+  return f.template operator()<0, 0>();
 }
 
 }  // namespace
@@ -105,9 +181,8 @@ ArxEstimator::Gram ArxEstimator::x_blocks(const std::vector<double>& x) const {
   return g;
 }
 
-LinearFit ArxEstimator::solve(const Gram& g, const ArxStructure& s,
-                              const std::vector<double>& x) const {
-  LinearFit f;
+bool ArxEstimator::coefficients(const Gram& g, const ArxStructure& s, LinearFit& f) const {
+  f = LinearFit{};
   f.structure = s;
   const int na = s.na, nb = s.nb;
   const int na_max = opt_.range.na_max;
@@ -140,9 +215,9 @@ LinearFit ArxEstimator::solve(const Gram& g, const ArxStructure& s,
   // A valve that never moves makes its lags collinear with c: a tiny ridge keeps LDLT defined.
   M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
   Eigen::LDLT<Eigen::MatrixXd> ldlt(M);
-  if (ldlt.info() != Eigen::Success) return f;
+  if (ldlt.info() != Eigen::Success) return false;
   const Eigen::VectorXd th = ldlt.solve(r);
-  if (!th.allFinite()) return f;
+  if (!th.allFinite()) return false;
   f.a.resize(static_cast<std::size_t>(na));
   f.b.resize(static_cast<std::size_t>(nb));
   for (int i = 0; i < na; ++i) f.a[static_cast<std::size_t>(i)] = -th[i];
@@ -152,12 +227,20 @@ LinearFit ArxEstimator::solve(const Gram& g, const ArxStructure& s,
   } else {
     f.c = th[na + nb];
   }
-  if (!stable(f.a)) return f;
-  const double sse = window_sse(f, x);
-  if (!std::isfinite(sse)) return f;
+  return stable(f.a);
+}
+
+void ArxEstimator::score(LinearFit& f, double sse, double bound) const {
+  if (!std::isfinite(sse) || sse > bound) return;
   f.sse = sse;
   f.fitness_percent = den_ > 0 ? (1.0 - std::sqrt(sse / den_)) * 100.0 : kNaN;
   f.ok = true;
+}
+
+LinearFit ArxEstimator::solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x,
+                              double bound) const {
+  LinearFit f;
+  if (coefficients(g, s, f)) score(f, window_sse(f, x, bound), bound);
   return f;
 }
 
@@ -169,20 +252,89 @@ LinearFit ArxEstimator::fit(const std::vector<double>& x, const ArxStructure& s)
   return solve(x_blocks(x), s, x);
 }
 
-LinearFit ArxEstimator::fit(const std::vector<double>& x, bool parsimony) const {
-  const Gram g = x_blocks(x);
+LinearFit ArxEstimator::plain_fit(const Gram& g, const std::vector<double>& x,
+                                  bool parsimony) const {
   const auto& r = opt_.range;
   std::vector<LinearFit> fits;
   LinearFit best;
+  thread_local std::vector<double> v, load;
   for (int nk = r.nk_min; nk <= r.nk_max; ++nk)
     for (int na = r.na_min; na <= r.na_max; ++na)
       for (int nb = r.nb_min; nb <= r.nb_max; ++nb) {
-        LinearFit f = solve(g, ArxStructure{na, nb, nk}, x);
+        LinearFit f;
+        if (!coefficients(g, ArxStructure{na, nb, nk}, f)) continue;
+        const SseWindow w = window(f, x, kInf, v, load);
+        score(f, opt_.integrating ? simulated_sse<0, 0, true>(w) : simulated_sse<0, 0, false>(w),
+              kInf);
         if (!f.ok) continue;
         if (!best.ok || f.sse < best.sse) best = f;
         if (parsimony) fits.push_back(std::move(f));
       }
+  return !parsimony || !best.ok || opt_.parsimony_percent <= 0 ? best : pick(fits);
+}
+
+LinearFit ArxEstimator::fit(const std::vector<double>& x, bool parsimony) const {
+  const Gram g = x_blocks(x);
+  if (opt_.plain_scan) return plain_fit(g, x, parsimony);
+  const auto& r = opt_.range;
+  std::vector<LinearFit> fits;
+  LinearFit best;
+  // A structure that cannot be chosen need not be simulated to the end: without parsimony one
+  // that cannot beat the best so far; with it, one that cannot come within parsimony_percent of
+  // the best so far (the final best is no worse, so its window is no wider). Slack keeps the
+  // bound on the safe side of rounding: pick() still applies the exact rule.
+  const auto bound = [&](const LinearFit& b) {
+    if (!b.ok) return kInf;
+    if (!parsimony || opt_.parsimony_percent <= 0) return b.sse;
+    const double e = 1.0 - (b.fitness_percent - opt_.parsimony_percent) / 100.0;
+    return den_ > 0 && e > 0 ? den_ * e * e * (1.0 + 1e-6) + 1e-300 : kInf;
+  };
+  // Equal errors go to the first structure in scan order, as a plain scan keeps it.
+  const auto order = [](const ArxStructure& s) { return std::make_tuple(s.nk, s.na, s.nb); };
+  const auto better = [&](const LinearFit& f) {
+    return !best.ok || f.sse < best.sse ||
+           (f.sse == best.sse && order(f.structure) < order(best.structure));
+  };
+  // Without parsimony the structure that won this thread's last fit goes first: a search's
+  // successive valve parameters are close, so it usually wins again, and its error bounds the
+  // others from the start. The answer does not depend on the hint, only the time.
+  thread_local ArxStructure hint{0, 0, -1};
+  const bool hinted = !parsimony && hint.na >= r.na_min && hint.na <= r.na_max &&
+                      hint.nb >= r.nb_min && hint.nb <= r.nb_max && hint.nk >= r.nk_min &&
+                      hint.nk <= r.nk_max;
+  if (hinted) best = solve(g, hint, x);
+  // Structures that differ only in nk are simulated four at a time: the recursion is a chain of
+  // dependent multiply-adds, and four independent chains keep the core busy while one waits.
+  std::array<LinearFit, 4> batch;
+  std::size_t n = 0;
+  const auto flush = [&] {
+    std::array<double, 4> sse{};
+    window_sse4(batch.data(), n, x, bound(best), sse.data());
+    for (std::size_t i = 0; i < n; ++i) {
+      LinearFit& f = batch[i];
+      score(f, sse[i], bound(best));
+      if (!f.ok) continue;
+      if (better(f)) best = f;
+      if (parsimony) fits.push_back(std::move(f));
+    }
+    n = 0;
+  };
+  for (int na = r.na_min; na <= r.na_max; ++na)
+    for (int nb = r.nb_min; nb <= r.nb_max; ++nb) {
+      for (int nk = r.nk_min; nk <= r.nk_max; ++nk) {
+        const ArxStructure s{na, nb, nk};
+        if (hinted && s == hint) continue;
+        if (!coefficients(g, s, batch[n])) continue;
+        if (++n == batch.size()) flush();
+      }
+      if (n > 0) flush();
+    }
+  if (!parsimony && best.ok) hint = best.structure;
   if (!parsimony || !best.ok || opt_.parsimony_percent <= 0) return best;
+  // pick() breaks equal errors by position: give it the scan order.
+  std::sort(fits.begin(), fits.end(), [&](const LinearFit& a, const LinearFit& b) {
+    return order(a.structure) < order(b.structure);
+  });
   return pick(fits);
 }
 
@@ -297,34 +449,67 @@ std::vector<double> ArxEstimator::drift_series(const LinearFit& f) const {
   return d;
 }
 
-double ArxEstimator::window_sse(const LinearFit& f, const std::vector<double>& x) const {
-  // The search's inner loop: only the estimation window, no allocation beyond one buffer.
-  thread_local std::vector<double> v;
-  v.assign(w_.begin(), w_.begin() + static_cast<std::ptrdiff_t>(end_));
-  const std::size_t na = f.a.size(), nb = f.b.size();
-  const std::size_t nk = static_cast<std::size_t>(f.structure.nk);
-  const double* a = f.a.data();
-  const double* b = f.b.data();
-  const std::size_t nh = f.drift_knots.size();
-  double ylev = opt_.integrating ? y_[t0_ - 1] : 0.0;
-  double sse = 0.0;
-  for (std::size_t t = t0_; t < end_; ++t) {
-    double s;
-    if (nh > 0) {
+// The buffers of one simulation lane: v seeded with the outputs before t0, and the load over the
+// window when the fit has one (else nullptr).
+SseWindow ArxEstimator::window(const LinearFit& f, const std::vector<double>& x, double bound,
+                               std::vector<double>& v, std::vector<double>& load) const {
+  const std::size_t na = f.a.size();
+  v.resize(end_);
+  const std::size_t seed = std::min(t0_, na);  // outputs before t0 the recursion reads
+  std::copy(w_.begin() + static_cast<std::ptrdiff_t>(t0_ - seed),
+            w_.begin() + static_cast<std::ptrdiff_t>(t0_),
+            v.begin() + static_cast<std::ptrdiff_t>(t0_ - seed));
+  const double* d = nullptr;
+  if (!f.drift_knots.empty()) {
+    load.resize(end_);
+    for (std::size_t t = t0_; t < end_; ++t) {
       const std::size_t k = t - t0_, j = k / h_;
       const double frac = static_cast<double>(k - j * h_) / static_cast<double>(h_);
-      s = f.drift_knots[j] * (1.0 - frac) + (frac > 0 ? f.drift_knots[j + 1] * frac : 0.0);
-    } else {
-      s = f.c;
+      load[t] = f.drift_knots[j] * (1.0 - frac) + (frac > 0 ? f.drift_knots[j + 1] * frac : 0.0);
     }
-    for (std::size_t i = 1; i <= na; ++i) s -= a[i - 1] * v[t - i];
-    for (std::size_t k = 1; k <= nb; ++k) s += b[k - 1] * x[t - nk - k];
-    v[t] = s;
-    double ys = s;
-    if (opt_.integrating) ys = ylev += s;
-    sse += (ys - y_[t]) * (ys - y_[t]);
+    d = load.data();
   }
-  return sse;
+  return SseWindow{.a = f.a.data(),
+                   .na = na,
+                   .b = f.b.data(),
+                   .nb = f.b.size(),
+                   .nk = static_cast<std::size_t>(f.structure.nk),
+                   .x = x.data(),
+                   .y = y_.data(),
+                   .v = v.data(),
+                   .t0 = t0_,
+                   .end = end_,
+                   .c = f.c,
+                   .load = d,
+                   .ylev = opt_.integrating ? y_[t0_ - 1] : 0.0,
+                   .bound = bound};
+}
+
+double ArxEstimator::window_sse(const LinearFit& f, const std::vector<double>& x,
+                                double bound) const {
+  // The search's inner loop: only the estimation window, no allocation beyond two buffers.
+  thread_local std::vector<double> v, load;
+  const SseWindow w = window(f, x, bound, v, load);
+  return with_orders(w.na, w.nb, [&]<std::size_t NA, std::size_t NB>() {
+    return opt_.integrating ? simulated_sse<NA, NB, true>(w) : simulated_sse<NA, NB, false>(w);
+  });
+}
+
+void ArxEstimator::window_sse4(const LinearFit* fs, std::size_t n, const std::vector<double>& x,
+                               double bound, double* sse) const {
+  if (n == 0) return;
+  // Fewer than four: the spare lanes repeat the first (their sums are dropped).
+  thread_local std::array<std::vector<double>, 4> v, load;
+  std::array<SseWindow, 4> w;
+  for (std::size_t l = 0; l < 4; ++l) w[l] = window(fs[l < n ? l : 0], x, bound, v[l], load[l]);
+  std::array<double, 4> out{};
+  with_orders(w[0].na, w[0].nb, [&]<std::size_t NA, std::size_t NB>() {
+    if (opt_.integrating)
+      simulated_sse4<NA, NB, true>(w, out.data());
+    else
+      simulated_sse4<NA, NB, false>(w, out.data());
+  });
+  for (std::size_t l = 0; l < n; ++l) sse[l] = out[l];
 }
 
 std::vector<double> ArxEstimator::simulate(const LinearFit& f, const std::vector<double>& x) const {

@@ -1,0 +1,190 @@
+// The structure search of ArxEstimator prunes and batches its simulations for speed; these
+// tests hold it to a plain scan that fits and simulates every structure to the end.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <random>
+#include <tuple>
+#include <vector>
+
+#include "valvediag/effect_estimators.hpp"
+
+using namespace valvediag;
+
+namespace {
+
+struct Record {
+  std::vector<double> x, y;
+};
+
+// A valve position of random steps and ramps, and a second-order output with dead time, a slow
+// load and measurement noise (an integrating output when asked).
+Record record(std::uint64_t seed, bool integrating, std::size_t N = 900) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  std::uniform_real_distribution<double> level(30.0, 70.0);
+  std::uniform_int_distribution<int> hold(20, 80);
+  Record r;
+  r.x.resize(N);
+  double target = level(rng);
+  int left = hold(rng);
+  for (std::size_t t = 0; t < N; ++t) {
+    if (--left <= 0) {
+      target = level(rng);
+      left = hold(rng);
+    }
+    r.x[t] = t == 0 ? target : r.x[t - 1] + 0.3 * (target - r.x[t - 1]);
+  }
+  r.y.assign(N, 0.0);
+  double v1 = 0.0, v2 = 0.0, level_y = 10.0;
+  for (std::size_t t = 5; t < N; ++t) {
+    const double load = 0.5 * std::sin(static_cast<double>(t) / 150.0);
+    const double v = 1.5 * v1 - 0.56 * v2 + 0.04 * (r.x[t - 4] - 50.0) + 0.01 * load;
+    v2 = v1;
+    v1 = v;
+    level_y += integrating ? 0.02 * v : 0.0;
+    r.y[t] = (integrating ? level_y : v) + noise(rng);
+  }
+  return r;
+}
+
+// Every structure of the range fitted and simulated to the end (fit(x, s) takes one structure).
+std::vector<LinearFit> every_structure(const ArxEstimator& est, const std::vector<double>& x) {
+  const StructureRange& r = est.options().range;
+  std::vector<LinearFit> fits;
+  for (int nk = r.nk_min; nk <= r.nk_max; ++nk)
+    for (int na = r.na_min; na <= r.na_max; ++na)
+      for (int nb = r.nb_min; nb <= r.nb_max; ++nb) {
+        LinearFit f = est.fit(x, ArxStructure{na, nb, nk});
+        if (f.ok) fits.push_back(f);
+      }
+  return fits;
+}
+
+// The scan's answer: the smallest error, the first in scan order among equals.
+const LinearFit& plain_best(const std::vector<LinearFit>& fits) {
+  const LinearFit* best = &fits.front();
+  for (const auto& f : fits)
+    if (f.sse < best->sse) best = &f;
+  return *best;
+}
+
+// The parsimony rule by hand: within parsimony_percent of the best, fewest na + nb, then the
+// smallest nk, then the smallest na.
+const LinearFit& plain_parsimonious(const std::vector<LinearFit>& fits, double percent) {
+  const LinearFit& best = plain_best(fits);
+  const LinearFit* p = &best;
+  auto key = [](const LinearFit& f) {
+    return std::make_tuple(f.structure.na + f.structure.nb, f.structure.nk, f.structure.na);
+  };
+  for (const auto& f : fits)
+    if (f.fitness_percent >= best.fitness_percent - percent && key(f) < key(*p)) p = &f;
+  return *p;
+}
+
+void check_same(const LinearFit& got, const LinearFit& want) {
+  REQUIRE(got.ok);
+  CHECK(got.structure == want.structure);
+  CHECK(got.sse == want.sse);  // the same operations in the same order: equal to the bit
+  CHECK(got.a == want.a);
+  CHECK(got.b == want.b);
+  CHECK(got.c == want.c);
+  CHECK(got.drift_knots == want.drift_knots);
+}
+
+}  // namespace
+
+TEST_CASE("ArxEstimator: the pruned, batched structure search gives the plain scan's answer") {
+  // Orders 1..3 cover the unrolled kernels (na, nb <= 2) and the general one; nk to 13 gives
+  // batches of four and a partial last batch.
+  int cases = 0;
+  for (std::uint64_t seed = 1; seed <= 6; ++seed)
+    for (const bool drift : {false, true})
+      for (const bool integrating : {false, true}) {
+        CAPTURE(seed);
+        CAPTURE(drift);
+        CAPTURE(integrating);
+        const Record r = record(seed, integrating);
+        LinearOptions opt;
+        opt.range = StructureRange{1, 3, 1, 3, 0, 13};
+        opt.drift = drift;
+        opt.integrating = integrating;
+        opt.end = 650;  // an estimation window shorter than the record, as with a held-out part
+        const ArxEstimator est(r.y, opt);
+        LinearOptions plain_opt = opt;
+        plain_opt.plain_scan = true;
+        const ArxEstimator plain(r.y, plain_opt);
+        // Several valve positions in a row, as a search makes them: the later ones start from
+        // the structure the earlier won.
+        for (const double shift : {0.0, 0.7, -1.3}) {
+          std::vector<double> x = r.x;
+          for (std::size_t t = 0; t < x.size(); ++t)
+            x[t] += shift * std::sin(static_cast<double>(t) / 40.0);
+          const std::vector<LinearFit> all = every_structure(est, x);
+          REQUIRE(!all.empty());
+          check_same(est.fit(x), plain_best(all));
+          check_same(est.fit(x, true), plain_parsimonious(all, opt.parsimony_percent));
+          // The reference search (the benchmark's baseline) agrees too.
+          check_same(plain.fit(x), plain_best(all));
+          check_same(plain.fit(x, true), plain_parsimonious(all, opt.parsimony_percent));
+          ++cases;
+        }
+      }
+  CHECK(cases == 72);
+}
+
+// An output from a random ARX system: na, nb up to 3, nk up to 6, poles inside 0.3 .. 0.95.
+Record random_system(std::uint64_t seed, std::size_t N = 500) {
+  std::mt19937_64 rng(seed);
+  std::uniform_int_distribution<int> order(1, 3), delay(0, 6);
+  std::uniform_real_distribution<double> pole(0.3, 0.95), tap(0.01, 0.06);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  Record r = record(seed, false, N);
+  const int na = order(rng), nb = order(rng), nk = delay(rng);
+  // A = product of (1 - p q^-1): a stable polynomial with real poles.
+  std::vector<double> a{1.0};
+  for (int i = 0; i < na; ++i) {
+    const double p = pole(rng);
+    std::vector<double> next(a.size() + 1, 0.0);
+    for (std::size_t j = 0; j < a.size(); ++j) {
+      next[j] += a[j];
+      next[j + 1] -= p * a[j];
+    }
+    a = next;
+  }
+  std::vector<double> b(static_cast<std::size_t>(nb));
+  for (auto& v : b) v = tap(rng);
+  std::vector<double> v(N, 0.0);
+  for (std::size_t t = 12; t < N; ++t) {
+    double s = 0.0;
+    for (std::size_t i = 1; i < a.size(); ++i) s -= a[i] * v[t - i];
+    for (std::size_t k = 0; k < b.size(); ++k)
+      s += b[k] * (r.x[t - static_cast<std::size_t>(nk) - 1 - k] - 50.0);
+    v[t] = s;
+    r.y[t] = s + noise(rng);
+  }
+  return r;
+}
+
+TEST_CASE("ArxEstimator: every near-best structure reaches the parsimony rule") {
+  // Random systems and windows: the rule often picks a smaller structure than the best fit,
+  // one the search met after better ones; pruning must not drop it.
+  int differs = 0;
+  for (std::uint64_t seed = 1; seed <= 60; ++seed)
+    for (const double percent : {0.1, 0.5, 2.0}) {
+      CAPTURE(seed);
+      CAPTURE(percent);
+      const Record r = random_system(seed);
+      LinearOptions opt;
+      opt.range = StructureRange{1, 3, 1, 3, 0, 9};
+      opt.parsimony_percent = percent;
+      const ArxEstimator est(r.y, opt);
+      const std::vector<LinearFit> all = every_structure(est, r.x);
+      REQUIRE(!all.empty());
+      const LinearFit& want = plain_parsimonious(all, opt.parsimony_percent);
+      check_same(est.fit(r.x, true), want);
+      if (!(want.structure == plain_best(all).structure)) ++differs;
+    }
+  MESSAGE("the rule chose another structure than the best fit in " << differs << " of 180");
+  CHECK(differs > 0);
+}
