@@ -121,9 +121,10 @@ class ArxEstimator {
   std::vector<double> y_, w_;  // output and regression target (w = y or its difference)
   LinearOptions opt_;
   std::size_t t0_ = 0, end_ = 0, h_ = 0, knots_ = 0;
-  int lag0_ = 1, lags_ = 0;  // x lags lag0_ .. lag0_ + lags_ - 1
-  int nfixed_ = 0;           // fixed columns: w lags 1..na_max, then const or hats
-  std::vector<double> F_;    // fixed columns, column-major, rows t0..end-1
+  int lag0_ = 1, lags_ = 0;       // x lags lag0_ .. lag0_ + lags_ - 1
+  int nfixed_ = 0;                // fixed columns: w lags 1..na_max, then const or hats
+  std::vector<double> F_;         // fixed columns, column-major, rows t0..end-1
+  std::vector<double> hat_frac_;  // drift: sample k's distance past its knot, in knot intervals
   std::vector<double> FF_, Fw_;
   double ww_ = 0.0, den_ = 0.0;
 };

@@ -139,9 +139,11 @@ ArxEstimator::ArxEstimator(std::vector<double> y, const LinearOptions& opt)
   for (int i = 1; i <= r.na_max; ++i)
     for (std::size_t k = 0; k < n; ++k) col(i - 1)[k] = w_[t0_ + k - static_cast<std::size_t>(i)];
   if (opt_.drift) {
+    hat_frac_.resize(n);
     for (std::size_t k = 0; k < n; ++k) {
       const std::size_t j = k / h_;
       const double frac = static_cast<double>(k - j * h_) / static_cast<double>(h_);
+      hat_frac_[k] = frac;
       col(r.na_max + static_cast<int>(j))[k] = 1.0 - frac;
       if (frac > 0) col(r.na_max + static_cast<int>(j) + 1)[k] = frac;
     }
@@ -461,11 +463,16 @@ SseWindow ArxEstimator::window(const LinearFit& f, const std::vector<double>& x,
             v.begin() + static_cast<std::ptrdiff_t>(t0_ - seed));
   const double* d = nullptr;
   if (!f.drift_knots.empty()) {
+    // Interval by interval, with the hat functions' fractions from the constructor (no division
+    // per sample: this runs for every structure the search tries).
     load.resize(end_);
-    for (std::size_t t = t0_; t < end_; ++t) {
-      const std::size_t k = t - t0_, j = k / h_;
-      const double frac = static_cast<double>(k - j * h_) / static_cast<double>(h_);
-      load[t] = f.drift_knots[j] * (1.0 - frac) + (frac > 0 ? f.drift_knots[j + 1] * frac : 0.0);
+    const std::size_t n = end_ - t0_, knots = f.drift_knots.size();
+    for (std::size_t j = 0, k0 = 0; k0 < n; ++j, k0 += h_) {
+      const double left = f.drift_knots[j], right = j + 1 < knots ? f.drift_knots[j + 1] : 0.0;
+      for (std::size_t k = k0; k < std::min(k0 + h_, n); ++k) {
+        const double frac = hat_frac_[k];
+        load[t0_ + k] = left * (1.0 - frac) + (frac > 0 ? right * frac : 0.0);
+      }
     }
     d = load.data();
   }
