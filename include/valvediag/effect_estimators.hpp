@@ -95,25 +95,22 @@ class ArxEstimator {
  private:
   struct Gram;
   Gram x_blocks(const std::vector<double>& x) const;
-  // bound: a structure whose simulated-output SSE exceeds it cannot be chosen, so its simulation
-  // stops there and it comes back not ok (the grid's answer is unchanged).
-  LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x,
-                  double bound = std::numeric_limits<double>::infinity()) const;
+  // One structure, fitted and simulated to the end.
+  LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x) const;
   // a, b and c (or the load's knots) of structure s by least squares; false when the normal
   // equations fail or A is unstable.
   bool coefficients(const Gram& g, const ArxStructure& s, LinearFit& f) const;
   // Sets f's sse and fitness and marks it ok when sse is finite and within bound.
   void score(LinearFit& f, double sse, double bound) const;
-  // The SSE over the estimation window; stops early, returning a value above bound, once the
-  // partial sum exceeds it (a sum of squares only grows).
-  double window_sse(const LinearFit& f, const std::vector<double>& x,
-                    double bound = std::numeric_limits<double>::infinity()) const;
-  // The same for n <= 4 fits of equal na and nb, simulated side by side; sse[i] for fs[i].
+  // The simulated output's SSE over the estimation window.
+  double window_sse(const LinearFit& f, const std::vector<double>& x) const;
+  // The same for n <= 4 fits of equal na and nb, simulated side by side; sse[i] for fs[i]. Stops
+  // early, with sums above bound, once every one exceeds it (then none can be chosen).
   void window_sse4(const LinearFit* fs, std::size_t n, const std::vector<double>& x, double bound,
                    double* sse) const;
   // One lane over the buffers v and load (the caller's, reused between calls).
-  SseWindow window(const LinearFit& f, const std::vector<double>& x, double bound,
-                   std::vector<double>& v, std::vector<double>& load) const;
+  SseWindow window(const LinearFit& f, const std::vector<double>& x, std::vector<double>& v,
+                   std::vector<double>& load) const;
   LinearFit pick(const std::vector<LinearFit>& fits) const;  // the parsimony rule
   LinearFit plain_fit(const Gram& g, const std::vector<double>& x, bool parsimony) const;
   LinearFit refine(const LinearFit& ls, const std::vector<double>& x, int iterations) const;
