@@ -85,6 +85,10 @@ struct Diagnosis {
   const DiagnosisStep& last() const { return steps.back(); }
 };
 
+// The model a verdict reads (verdict.hpp): the climbed ladder's final model; for a single step,
+// its top finding's trial model when that finding is supported.
+ModelSpec verdict_model(const Diagnosis& d);
+
 // When part of a memory finding's held-out gain comes from holding the valve still rather than
 // from predicted slips (Finding::held_valve_validation_fitness_percent): one sentence saying how
 // much, for the reports; "" otherwise.

@@ -57,6 +57,9 @@ struct ModelSpec {
 // path OP took, not on its present value alone.
 bool is_memory_effect(std::string_view name);
 bool has_memory_effect(const ModelSpec& spec);
+// A valve effect other than actuator-lag (the one linear valve effect): without one, an
+// actuator lag commutes with the process lags and no OP/PV record can place it in the valve.
+bool has_valve_nonlinearity(const ModelSpec& spec);
 
 // Parses "linear", "stiction", "stiction:kano+saturation", ... (spaces around names ignored).
 // Throws ModelSpecError.

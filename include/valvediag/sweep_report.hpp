@@ -16,6 +16,7 @@ struct SweepInfo {
   std::string source;  // site config and database, or "files"
   std::string shard;   // "I/N" or ""
   double window_s = 0;
+  double validation_fraction = 0.3;  // of each record held out for scoring (sweep --validate)
   double elapsed_s = 0;
 };
 

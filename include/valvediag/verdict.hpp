@@ -11,8 +11,9 @@
 //  3. A stick-slip limit cycle (limit_cycle.hpp), which trial fits can miss.
 //  4. The whole-record test (whole_record_test.hpp): a valve that slips once or twice, which the
 //     held-out tail cannot confirm.
-//  5. A static valve nonlinearity in the final model (saturation, characteristic, actuator lag):
-//     other-nonlinearity; else no-valve-problem.
+//  5. A static valve nonlinearity in the final model (saturation, characteristic):
+//     other-nonlinearity; else no-valve-problem. An actuator lag is neither: it is linear, and
+//     OP and PV cannot tell it from one more process lag (the recorded valve position can).
 #pragma once
 
 #include <string>

@@ -27,6 +27,7 @@
 #include "valvediag/site_config.hpp"
 #include "valvediag/sweep_report.hpp"
 #include "valvediag/sweep_store.hpp"
+#include "valvediag/text_stats.hpp"
 
 namespace valvediag::cli {
 
@@ -72,6 +73,7 @@ struct SweepArgs {
   std::vector<std::string> files;
   DataOptions layout;  // CSV layout for data files
   int jobs = 0;
+  double validate = 0.3;  // fraction of each record held out for scoring, as diagnose
   bool quiet = false;
   bool keep_lead_in = false;
 };
@@ -92,6 +94,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   opt.range = job.range;
   opt.diagnose.fit.threads = threads;
   opt.keep_lead_in = a.keep_lead_in;
+  opt.diagnose.validation_fraction = a.validate;
   LoopData d;
   std::vector<std::string> notes;  // column choices: the per-loop report shows them, not the sweep
   try {
@@ -328,6 +331,9 @@ void add_sweep(CLI::App& app, int& exit_code) {
   cmd->add_option("--html", a->html, "write the ranked summary as HTML");
   cmd->add_option("--reports", a->reports,
                   "write each loop's HTML report into this folder (linked from --html)");
+  cmd->add_option("--validate", a->validate,
+                  "fraction of each record held out for scoring, as in diagnose")
+      ->capture_default_str();
   cmd->add_flag("--quiet", a->quiet, "no line per finished loop");
   cmd->add_flag("--keep-lead-in", a->keep_lead_in,
                 "diagnose the whole window even when OP holds still for most of it before the "
@@ -349,6 +355,8 @@ void add_sweep(CLI::App& app, int& exit_code) {
     const double window_s = duration_option("--window", a->window);
     const double timeout_s = duration_option("--loop-timeout", a->loop_timeout);
     if (a->jobs < 0) throw UsageError("--jobs must be 0 (one per core) or more");
+    if (!(a->validate > 0.05 && a->validate < 0.9))
+      throw UsageError("--validate must lie in (0.05, 0.9)");
     if (!a->reports.empty()) {
       std::error_code ec;
       fs::create_directories(a->reports, ec);
@@ -398,6 +406,7 @@ void add_sweep(CLI::App& app, int& exit_code) {
     info.source = site_mode ? a->config + " / " + a->db : std::to_string(jobs.size()) + " files";
     info.shard = a->shard;
     info.window_s = site_mode ? window_s : 0.0;
+    info.validation_fraction = a->validate;
     std::unique_ptr<SweepStore> store;
     std::int64_t sweep_id = 0;
     if (!a->db.empty()) {
@@ -498,6 +507,15 @@ void add_sweep_merge(CLI::App& app, int& exit_code) {
       if (info.started_utc.empty() || started < info.started_utc) info.started_utc = started;
       info.finished_utc = std::max(info.finished_utc, j.value("finished_utc", std::string()));
       info.window_s = j.value("window_s", 0.0);
+      // Fitness and verdicts depend on the held-out share: parts scored on different shares are
+      // not one sweep. (Files written before the key existed held out 0.3.)
+      const double held = j.value("validate", 0.3);
+      if (&f != &a->files.front() && held != info.validation_fraction)
+        throw UsageError(f + ": held out " + strprintf("%g", held) +
+                         " of each record (--validate), " + a->files.front() + " held out " +
+                         strprintf("%g", info.validation_fraction) +
+                         ": merge the parts of one sweep, run with the same --validate");
+      info.validation_fraction = held;
       for (auto& l : part) {
         if (!names.insert(l.loop).second)
           throw UsageError(f + ": loop '" + l.loop +

@@ -338,13 +338,9 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     }
     // An actuator lag and a process lag commute when no valve nonlinearity sits between them:
     // on such a model no data can tell them apart.
-    bool nonlinear_valve = false;
-    for (const auto& e : model.effects)
-      nonlinear_valve = nonlinear_valve || (find_effect(e.name)->stage == EffectStage::Valve &&
-                                            e.name != "actuator-lag");
     const bool commuting_lags =
-        !nonlinear_valve && ((a.effect == "actuator-lag" && b.effect == "order") ||
-                             (a.effect == "order" && b.effect == "actuator-lag"));
+        !has_valve_nonlinearity(model) && ((a.effect == "actuator-lag" && b.effect == "order") ||
+                                           (a.effect == "order" && b.effect == "actuator-lag"));
     if (fa && fb && a.gain_percent >= opt.min_gain_percent &&
         b.gain_percent >= opt.min_gain_percent &&
         std::abs(a.gain_percent - b.gain_percent) <=
@@ -423,10 +419,7 @@ LimitCycle limit_cycle_of(const std::vector<double>& u, const std::vector<double
 WholeRecordTest whole_record_of(const std::vector<double>& u, const std::vector<double>& y,
                                 double Ts, const Diagnosis& d, const DiagnoseOptions& opt) {
   if (!opt.whole_record || d.limit_cycle.stick_slip) return {};
-  ModelSpec m = d.last().fit.spec;
-  if (d.steps.size() == 1 && !d.last().findings.empty() && d.last().findings.front().supported)
-    m = d.last().findings.front().trial_spec;
-  if (has_memory_effect(m)) return {};
+  if (has_memory_effect(verdict_model(d))) return {};
   try {
     return whole_record_test(u, y, Ts, start_step(d).fit.spec, fit_options(opt),
                              opt.whole_record_options);
@@ -437,6 +430,16 @@ WholeRecordTest whole_record_of(const std::vector<double>& u, const std::vector<
 
 std::string with_limit_cycle(std::string conclusion, const LimitCycle& c) {
   if (c.stick_slip) conclusion += " Limit cycle: " + c.summary + ".";
+  return conclusion;
+}
+
+// An actuator lag that the verdict does not count (verdict.hpp): say why.
+std::string with_lag_note(std::string conclusion, const Diagnosis& d) {
+  const ModelSpec m = verdict_model(d);
+  if (m.has("actuator-lag") && !has_valve_nonlinearity(m))
+    conclusion +=
+        " `actuator-lag` adds a linear lag: OP and PV cannot tell a slow actuator from one more "
+        "process lag, so it is no valve finding; the recorded valve position (--mv) can tell.";
   return conclusion;
 }
 
@@ -484,6 +487,13 @@ std::optional<std::pair<DiagnosisStep, std::string>> load_with_memory(const std:
 
 }  // namespace
 
+ModelSpec verdict_model(const Diagnosis& d) {
+  const DiagnosisStep& s = d.last();
+  if (d.steps.size() == 1 && !s.findings.empty() && s.findings.front().supported)
+    return s.findings.front().trial_spec;
+  return s.fit.spec;
+}
+
 std::string held_valve_note(const Finding& f) {
   constexpr double kNotePoints = 2.0;  // as DiagnoseOptions::min_gain_percent: worth saying
   const double held = f.held_valve_validation_fitness_percent;
@@ -507,14 +517,16 @@ Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, d
   const bool supported = !f.empty() && f.front().supported;
   d.limit_cycle = limit_cycle_of(u, y, Ts, d);
   d.whole_record = whole_record_of(u, y, Ts, d, opt);
-  d.conclusion = with_whole_record(
-      with_limit_cycle(
-          conclusion_of(d.last(), Ts, opt.time_origin_s,
-                        supported
-                            ? "The most likely missing effect is `" + f.front().effect + "`."
-                            : "No candidate effect improves the model by a meaningful margin."),
-          d.limit_cycle),
-      d.whole_record);
+  d.conclusion = with_lag_note(
+      with_whole_record(
+          with_limit_cycle(
+              conclusion_of(d.last(), Ts, opt.time_origin_s,
+                            supported
+                                ? "The most likely missing effect is `" + f.front().effect + "`."
+                                : "No candidate effect improves the model by a meaningful margin."),
+              d.limit_cycle),
+          d.whole_record),
+      d);
   return d;
 }
 
@@ -570,9 +582,11 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
   }
   d.limit_cycle = limit_cycle_of(u, y, Ts, d);
   d.whole_record = whole_record_of(u, y, Ts, d, opt);
-  d.conclusion = with_whole_record(
-      with_limit_cycle(conclusion_of(d.last(), Ts, opt.time_origin_s, why), d.limit_cycle),
-      d.whole_record);
+  d.conclusion = with_lag_note(
+      with_whole_record(
+          with_limit_cycle(conclusion_of(d.last(), Ts, opt.time_origin_s, why), d.limit_cycle),
+          d.whole_record),
+      d);
   if (!joint.empty()) d.conclusion = joint + " " + d.conclusion;
   if (!restart.empty()) d.conclusion = restart + " " + d.conclusion;
   return d;

@@ -98,6 +98,13 @@ bool has_memory_effect(const ModelSpec& spec) {
                      [](const EffectSpec& e) { return is_memory_effect(e.name); });
 }
 
+bool has_valve_nonlinearity(const ModelSpec& spec) {
+  return std::any_of(spec.effects.begin(), spec.effects.end(), [](const EffectSpec& e) {
+    const EffectInfo* info = find_effect(e.name);
+    return info && info->stage == EffectStage::Valve && e.name != "actuator-lag";
+  });
+}
+
 const EffectSpec* ModelSpec::find(std::string_view name) const {
   for (const auto& e : effects)
     if (e.name == name) return &e;

@@ -139,6 +139,7 @@ json sweep_json(const SweepInfo& info, const std::vector<LoopAssessment>& loops)
   j["source"] = info.source;
   j["shard"] = info.shard;
   j["window_s"] = info.window_s;
+  j["validate"] = info.validation_fraction;
   j["elapsed_s"] = info.elapsed_s;
   json arr = json::array();
   for (const auto& a : loops) arr.push_back(assessment_json(a));

@@ -209,6 +209,41 @@ TEST_CASE("hidden effects are named first, with a clear gain and overlapping int
   CHECK(confusion.size() == 10);  // every effect of the vocabulary is hidden at least once
 }
 
+TEST_CASE("an actuator lag alone is no valve finding: OP and PV cannot place it") {
+  // The same records as above (shared diagnoses): a third process lag behind an ideal valve and
+  // a slow actuator before a second-order process are one linear model class.
+  const std::pair<const char*, const char*> runs[] = {
+      {"third-order (3rd lag 16 s)", "third-order"}, {"slow-actuator (tau 20 s)", "slow-actuator"}};
+  for (const auto& [label, scenario] : runs) {
+    CAPTURE(label);
+    const char* name = scenario;
+    const Outcome& o = outcome(
+        std::string(label) + "#1", [name] { return named(name); }, 1);
+    const Finding& top = o.diagnosis.last().findings.front();
+    REQUIRE(top.supported);
+    CHECK((top.effect == "actuator-lag" || top.effect == "order"));
+    CHECK(verdict(o.diagnosis) == "no-valve-problem");
+    const bool note = o.diagnosis.conclusion.find(
+                          "cannot tell a slow actuator from one more "
+                          "process lag") != std::string::npos;
+    CHECK(note == (top.effect == "actuator-lag"));
+  }
+  // Beside a valve nonlinearity the lag no longer commutes with the process: that one counts.
+  Diagnosis d;
+  d.steps.emplace_back();
+  const std::pair<const char*, const char*> models[] = {
+      {"actuator-lag", "no-valve-problem"},
+      {"actuator-lag+saturation", "other-nonlinearity"},
+      {"actuator-lag+characteristic+order", "other-nonlinearity"},
+      {"actuator-lag+deadband", "deadband"},
+      {"actuator-lag+stiction:kano", "stiction"}};
+  for (const auto& [model, expected] : models) {
+    CAPTURE(model);
+    d.steps.front().fit.spec = parse_model_spec(model);
+    CHECK(verdict(d) == expected);
+  }
+}
+
 TEST_CASE("paper Example 1: stiction parameters, and preisach fits about equally (Example 3)") {
   const Outcome& o = outcome(
       "paper-ex1 (He fs 8.4, fd 3.5)#1", [] { return named("paper-ex1"); }, 1);

@@ -184,9 +184,20 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
   REQUIRE(m["loops"].size() == 4);
   for (const auto& l : j["loops"]) CHECK((*loop_in(m, l["loop"]))["verdict"] == l["verdict"]);
   CHECK(m["loops"][0]["loop"] == "sticky");
+  CHECK(m["validate"] == 0.3);
   r = run({"sweep-merge", p0, p0});
   CHECK(r.status == 2);
   CHECK(r.out.find("also in an earlier file") != std::string::npos);
+  // Parts scored on different held-out shares are not one sweep.
+  {
+    auto other = read_json(p1);
+    CHECK(other["validate"] == 0.3);
+    other["validate"] = 0.4;
+    std::ofstream((kTmp / "part-1b.json").string()) << other.dump();
+  }
+  r = run({"sweep-merge", p0, (kTmp / "part-1b.json").string()});
+  CHECK(r.status == 2);
+  CHECK(r.out.find("held out 0.4 of each record (--validate)") != std::string::npos);
   CHECK(run({"sweep-merge", bad}).status == 2);
 }
 
@@ -465,5 +476,6 @@ TEST_CASE("sweep: a loop over its time limit is stopped and reported; user error
             .status == 2);  // a site gives each loop's range
   CHECK(run({"sweep", longf, "--op-range", "100:0"}).status == 2);
   CHECK(run({"sweep", longf, "--window", "soon"}).status == 2);
+  CHECK(run({"sweep", longf, "--validate", "0.95"}).status == 2);
   CHECK(run({"trend", "--db", (kTmp / "none.sqlite").string()}).status == 2);
 }
