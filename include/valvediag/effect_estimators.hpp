@@ -108,9 +108,10 @@ class ArxEstimator {
   // early, with sums above bound, once every one exceeds it (then none can be chosen).
   void window_sse4(const LinearFit* fs, std::size_t n, const std::vector<double>& x, double bound,
                    double* sse) const;
-  // One lane over the buffers v and load (the caller's, reused between calls).
+  // One lane over the buffers v and load (the caller's, reused between calls); load nullptr:
+  // the lane carries the load as its knots only (the unrolled kernels make it sample by sample).
   SseWindow window(const LinearFit& f, const std::vector<double>& x, std::vector<double>& v,
-                   std::vector<double>& load) const;
+                   std::vector<double>* load) const;
   LinearFit pick(const std::vector<LinearFit>& fits) const;  // the parsimony rule
   LinearFit plain_fit(const Gram& g, const std::vector<double>& x, bool parsimony) const;
   LinearFit refine(const LinearFit& ls, const std::vector<double>& x, int iterations) const;

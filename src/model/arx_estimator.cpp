@@ -24,8 +24,13 @@ struct SseWindow {
   double* v;  // holds the outputs before t0; filled from t0 on
   std::size_t t0, end;
   double c;
-  const double* load;  // nullptr: the constant c
+  const double* load;  // nullptr: the constant c (or, with knots, not filled: see below)
   double ylev;         // integrating: the output before t0
+  // The load as its knots: load[t0 + k] = knots[j] (1 - frac[k]) + knots[j + 1] frac[k] with
+  // j = k / h (the hat functions). knots == nullptr: no load.
+  const double* knots = nullptr;
+  std::size_t knot_count = 0, h = 0;
+  const double* frac = nullptr;
 };
 
 namespace {
@@ -59,12 +64,12 @@ double simulated_sse(const SseWindow& w) {
   return sse;
 }
 
-// Four windows of the same orders (na, nb, or NA, NB when > 0) at once, each lane exactly as
-// simulated_sse computes it. Stops, returning sums above bound, once every lane's sum exceeds it
-// (a sum of squares only grows).
-template <std::size_t NA, std::size_t NB, bool Integrating>
-void simulated_sse4(const std::array<SseWindow, 4>& w, double bound, double* out) {
-  const std::size_t na = NA > 0 ? NA : w[0].na, nb = NB > 0 ? NB : w[0].nb;
+// Four windows of the same orders (na, nb) at once, each lane exactly as simulated_sse computes
+// it. Stops, returning sums above bound, once every lane's sum exceeds it (a sum of squares only
+// grows). The general orders' loop; simulated_sse4 below is the unrolled one.
+template <bool Integrating>
+void simulated_sse4_loop(const std::array<SseWindow, 4>& w, double bound, double* out) {
+  const std::size_t na = w[0].na, nb = w[0].nb;
   const double* y = w[0].y;
   const double* x = w[0].x;
   std::array<double, 4> ylev{}, sse{};
@@ -86,14 +91,91 @@ void simulated_sse4(const std::array<SseWindow, 4>& w, double bound, double* out
   for (std::size_t l = 0; l < 4; ++l) out[l] = sse[l];
 }
 
-// f.template operator()<NA, NB>() with the base grid's orders (1..2) unrolled, <0, 0> otherwise.
+// The same for orders NA, NB known at compile time (the loop above serves the others), with
+// each lane's load made from its knots as window() fills it, expression for expression, instead
+// of read from a buffer filled per lane. Coefficients and past outputs stay in registers:
+// storing each output and loading it back on the next sample put a store-to-load forwarding delay
+// on the recursion's dependent chain, and testing each lane for a load cost a branch per sample.
+// Same operations in the same order: the sums are the loop's, to the bit. Every lane has knots or
+// none (one estimator's fits do).
+template <std::size_t NA, std::size_t NB, bool Integrating>
+void simulated_sse4(const std::array<SseWindow, 4>& w, double bound, double* out) {
+  static_assert(NA > 0 && NB > 0);
+  const double* y = w[0].y;
+  const double* x = w[0].x;
+  const std::size_t t0 = w[0].t0, end = w[0].end;
+  double a[4][NA], b[4][NB], past[4][NA], c[4];
+  std::size_t nk[4];
+  std::array<double, 4> ylev{}, sse{};
+  for (std::size_t l = 0; l < 4; ++l) {
+    const SseWindow& q = w[l];
+    for (std::size_t i = 0; i < NA; ++i) {
+      a[l][i] = q.a[i];
+      past[l][i] = q.v[t0 - 1 - i];
+    }
+    for (std::size_t k = 0; k < NB; ++k) b[l][k] = q.b[k];
+    c[l] = q.c;
+    nk[l] = q.nk;
+    ylev[l] = q.ylev;
+  }
+  const auto run = [&]<bool Load>() {
+    // Load: the interval j between knots j and j + 1 and those knots, changed every h samples.
+    double left[4] = {}, right[4] = {};
+    std::size_t j = 0, next = t0;
+    for (std::size_t t = t0; t < end; ++t) {
+      double fk = 0.0;
+      if constexpr (Load) {
+        if (t == next) {
+          j = (t - t0) / w[0].h;
+          next = t + w[0].h;
+          for (std::size_t l = 0; l < 4; ++l) {
+            left[l] = w[l].knots[j];
+            right[l] = j + 1 < w[l].knot_count ? w[l].knots[j + 1] : 0.0;
+          }
+        }
+        fk = w[0].frac[t - t0];
+      }
+      for (std::size_t l = 0; l < 4; ++l) {
+        double s;
+        if constexpr (Load)
+          s = left[l] * (1.0 - fk) + (fk > 0 ? right[l] * fk : 0.0);
+        else
+          s = c[l];
+        for (std::size_t i = 0; i < NA; ++i) s -= a[l][i] * past[l][i];
+        for (std::size_t k = 0; k < NB; ++k) s += b[l][k] * x[t - nk[l] - 1 - k];
+        for (std::size_t i = NA - 1; i > 0; --i) past[l][i] = past[l][i - 1];
+        past[l][0] = s;
+        double ys = s;
+        if constexpr (Integrating) ys = ylev[l] += s;
+        sse[l] += (ys - y[t]) * (ys - y[t]);
+      }
+      if ((t & 63) == 0 && sse[0] > bound && sse[1] > bound && sse[2] > bound && sse[3] > bound)
+        break;
+    }
+  };
+  if (w[0].knots)
+    run.template operator()<true>();
+  else
+    run.template operator()<false>();
+  for (std::size_t l = 0; l < 4; ++l) out[l] = sse[l];
+}
+
+// f.template operator()<NA, NB>() with orders 1..kUnrolled unrolled, <0, 0> otherwise.
+constexpr std::size_t kUnrolled = 4;
+template <std::size_t NA, std::size_t NB = 1, class F>
+auto with_orders_from(std::size_t na, std::size_t nb, F& f) {
+  if constexpr (NA > kUnrolled) {
+    return f.template operator()<0, 0>();
+  } else if constexpr (NB > kUnrolled) {
+    return with_orders_from<NA + 1, 1>(na, nb, f);
+  } else {
+    if (na == NA && nb == NB) return f.template operator()<NA, NB>();
+    return with_orders_from<NA, NB + 1>(na, nb, f);
+  }
+}
 template <class F>
 auto with_orders(std::size_t na, std::size_t nb, F&& f) {
-  if (na == 1 && nb == 1) return f.template operator()<1, 1>();
-  if (na == 1 && nb == 2) return f.template operator()<1, 2>();
-  if (na == 2 && nb == 1) return f.template operator()<2, 1>();
-  if (na == 2 && nb == 2) return f.template operator()<2, 2>();
-  return f.template operator()<0, 0>();
+  return with_orders_from<1, 1>(na, nb, f);
 }
 
 }  // namespace
@@ -447,7 +529,7 @@ std::vector<double> ArxEstimator::drift_series(const LinearFit& f) const {
 // The buffers of one simulation lane: v seeded with the outputs before t0, and the load over the
 // window when the fit has one (else nullptr).
 SseWindow ArxEstimator::window(const LinearFit& f, const std::vector<double>& x,
-                               std::vector<double>& v, std::vector<double>& load) const {
+                               std::vector<double>& v, std::vector<double>* load) const {
   const std::size_t na = f.a.size();
   v.resize(end_);
   const std::size_t seed = std::min(t0_, na);  // outputs before t0 the recursion reads
@@ -455,19 +537,20 @@ SseWindow ArxEstimator::window(const LinearFit& f, const std::vector<double>& x,
             w_.begin() + static_cast<std::ptrdiff_t>(t0_),
             v.begin() + static_cast<std::ptrdiff_t>(t0_ - seed));
   const double* d = nullptr;
-  if (!f.drift_knots.empty()) {
+  if (!f.drift_knots.empty() && load) {
     // Interval by interval, with the hat functions' fractions from the constructor (no division
     // per sample: this runs for every structure the search tries).
-    load.resize(end_);
+    std::vector<double>& buf = *load;
+    buf.resize(end_);
     const std::size_t n = end_ - t0_, knots = f.drift_knots.size();
     for (std::size_t j = 0, k0 = 0; k0 < n; ++j, k0 += h_) {
       const double left = f.drift_knots[j], right = j + 1 < knots ? f.drift_knots[j + 1] : 0.0;
       for (std::size_t k = k0; k < std::min(k0 + h_, n); ++k) {
         const double frac = hat_frac_[k];
-        load[t0_ + k] = left * (1.0 - frac) + (frac > 0 ? right * frac : 0.0);
+        buf[t0_ + k] = left * (1.0 - frac) + (frac > 0 ? right * frac : 0.0);
       }
     }
-    d = load.data();
+    d = buf.data();
   }
   return SseWindow{.a = f.a.data(),
                    .na = na,
@@ -481,12 +564,16 @@ SseWindow ArxEstimator::window(const LinearFit& f, const std::vector<double>& x,
                    .end = end_,
                    .c = f.c,
                    .load = d,
-                   .ylev = opt_.integrating ? y_[t0_ - 1] : 0.0};
+                   .ylev = opt_.integrating ? y_[t0_ - 1] : 0.0,
+                   .knots = f.drift_knots.empty() ? nullptr : f.drift_knots.data(),
+                   .knot_count = f.drift_knots.size(),
+                   .h = h_,
+                   .frac = hat_frac_.data()};
 }
 
 double ArxEstimator::window_sse(const LinearFit& f, const std::vector<double>& x) const {
   thread_local std::vector<double> v, load;
-  const SseWindow w = window(f, x, v, load);
+  const SseWindow w = window(f, x, v, &load);
   const auto run = [&]<std::size_t NA, std::size_t NB>() {
     return opt_.integrating ? simulated_sse<NA, NB, true>(w) : simulated_sse<NA, NB, false>(w);
   };
@@ -499,14 +586,24 @@ void ArxEstimator::window_sse4(const LinearFit* fs, std::size_t n, const std::ve
   if (n == 0) return;
   // Fewer than four: the spare lanes repeat the first (their sums are dropped).
   thread_local std::array<std::vector<double>, 4> v, load;
+  // The unrolled kernels make each lane's load from its knots; the general loop reads it filled.
+  const bool unrolled = fs[0].a.size() <= kUnrolled && fs[0].b.size() <= kUnrolled;
   std::array<SseWindow, 4> w;
-  for (std::size_t l = 0; l < 4; ++l) w[l] = window(fs[l < n ? l : 0], x, v[l], load[l]);
+  for (std::size_t l = 0; l < 4; ++l)
+    w[l] = window(fs[l < n ? l : 0], x, v[l], unrolled ? nullptr : &load[l]);
   std::array<double, 4> out{};
   with_orders(w[0].na, w[0].nb, [&]<std::size_t NA, std::size_t NB>() {
-    if (opt_.integrating)
-      simulated_sse4<NA, NB, true>(w, bound, out.data());
-    else
-      simulated_sse4<NA, NB, false>(w, bound, out.data());
+    if constexpr (NA == 0) {
+      if (opt_.integrating)
+        simulated_sse4_loop<true>(w, bound, out.data());
+      else
+        simulated_sse4_loop<false>(w, bound, out.data());
+    } else {
+      if (opt_.integrating)
+        simulated_sse4<NA, NB, true>(w, bound, out.data());
+      else
+        simulated_sse4<NA, NB, false>(w, bound, out.data());
+    }
   });
   for (std::size_t l = 0; l < n; ++l) sse[l] = out[l];
 }

@@ -95,8 +95,8 @@ void check_same(const LinearFit& got, const LinearFit& want) {
 }  // namespace
 
 TEST_CASE("ArxEstimator: the pruned, batched structure search gives the plain scan's answer") {
-  // Orders 1..3 cover the unrolled kernels (na, nb <= 2) and the general one; nk to 13 gives
-  // batches of four and a partial last batch.
+  // na 1..5 and nb 1..3 cover the unrolled kernels (orders to 4) and the general one (na 5); nk
+  // to 13 gives batches of four and a partial last batch.
   int cases = 0;
   for (std::uint64_t seed = 1; seed <= 6; ++seed)
     for (const bool drift : {false, true})
@@ -106,7 +106,7 @@ TEST_CASE("ArxEstimator: the pruned, batched structure search gives the plain sc
         CAPTURE(integrating);
         const Record r = record(seed, integrating);
         LinearOptions opt;
-        opt.range = StructureRange{1, 3, 1, 3, 0, 13};
+        opt.range = StructureRange{1, 5, 1, 3, 0, 13};
         opt.drift = drift;
         opt.integrating = integrating;
         opt.end = 650;  // an estimation window shorter than the record, as with a held-out part
