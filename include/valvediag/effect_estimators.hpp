@@ -43,8 +43,9 @@ struct LinearOptions {
   // Among structures within this many fitness points of the best: fewest na + nb, then the
   // smallest nk, then the smallest na (the core's rule; fitness alone prefers bigger models).
   double parsimony_percent = 0.1;
-  // The reference search: every structure fitted and simulated to the end, one after another,
-  // in a loop of general orders (the benchmark's baseline; fit() gives the same answer without).
+  // The reference search: the Gram blocks as dense matrix products, every structure fitted and
+  // simulated to the end, one after another, in a loop of general orders (the benchmark's
+  // baseline). Without it fit() gives the same structure, its coefficients to rounding.
   bool plain_scan = false;
 };
 
@@ -62,8 +63,9 @@ struct LinearFit {
 
 // The linear half of the separable problem for one output record. Everything that does not
 // depend on x (lagged outputs, drift basis, their Gram blocks) is built once; each fit() costs
-// one pass over x for the x-dependent Gram blocks plus one simulation per structure, cut short
-// once the structure can no longer be chosen (the answer is the plain scan's, to the bit).
+// O(n lags) for the x-dependent Gram blocks (shifted sums) plus one simulation per structure, cut
+// short once the structure can no longer be chosen (on the same Gram blocks the answer is a plain
+// scan's, to the bit).
 // Thread-safe for concurrent fit() calls.
 class ArxEstimator {
  public:
@@ -95,6 +97,7 @@ class ArxEstimator {
  private:
   struct Gram;
   Gram x_blocks(const std::vector<double>& x) const;
+  Gram dense_blocks(const std::vector<double>& x) const;  // the same as matrix products
   // One structure, fitted and simulated to the end.
   LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x) const;
   // a, b and c (or the load's knots) of structure s by least squares; false when the normal

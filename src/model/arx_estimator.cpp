@@ -160,6 +160,20 @@ void simulated_sse4(const std::array<SseWindow, 4>& w, double bound, double* out
   for (std::size_t l = 0; l < 4; ++l) out[l] = sse[l];
 }
 
+// Four partial sums: the adds of one sum would wait on each other.
+double dot(const double* p, const double* q, std::size_t n) {
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  std::size_t k = 0;
+  for (; k + 4 <= n; k += 4) {
+    s0 += p[k] * q[k];
+    s1 += p[k + 1] * q[k + 1];
+    s2 += p[k + 2] * q[k + 2];
+    s3 += p[k + 3] * q[k + 3];
+  }
+  for (; k < n; ++k) s0 += p[k] * q[k];
+  return (s0 + s1) + (s2 + s3);
+}
+
 // f.template operator()<NA, NB>() with orders 1..kUnrolled unrolled, <0, 0> otherwise.
 constexpr std::size_t kUnrolled = 4;
 template <std::size_t NA, std::size_t NB = 1, class F>
@@ -246,6 +260,63 @@ ArxEstimator::ArxEstimator(std::vector<double> y, const LinearOptions& opt)
 ArxEstimator::Gram ArxEstimator::x_blocks(const std::vector<double>& x) const {
   if (x.size() != y_.size())
     throw std::invalid_argument("valve position and output differ in length");
+  // Column i of X is x lagged by lag0_ + i over the window, X_i[k] = x[t0_ + k - lag0_ - i], and
+  // column i + 1 is column i one sample later. So X'X is Toeplitz up to the window's two ends:
+  // XX(i + 1, j + 1) = XX(i, j) + X_i[-1] X_j[-1] - X_i[n-1] X_j[n-1], and likewise X' against
+  // the lagged outputs and the constant. One set of dot products, then O(1) per entry, and the hat
+  // functions of a load touch two knots per sample: O(n lags) in all, where the dense products
+  // cost O(n lags (lags + columns of F)). (X_i[-1] exists: t0_ >= nk_max + nb_max, the
+  // largest lag.)
+  if (opt_.plain_scan) return dense_blocks(x);
+  const std::size_t n = end_ - t0_;
+  const int L = lags_, na = opt_.range.na_max;
+  const auto X = [&](int i) { return x.data() + t0_ - static_cast<std::size_t>(lag0_ + i); };
+  const auto W = [&](int m) { return w_.data() + t0_ - static_cast<std::size_t>(m); };
+  const auto ends = [n](const double* p, const double* q) {
+    return p[-1] * q[-1] - p[n - 1] * q[n - 1];
+  };
+  Gram g;
+  g.XX.resize(L, L);
+  g.XF.resize(L, nfixed_);
+  g.Xw.resize(L);
+  for (int i = 0; i < L; ++i) {
+    g.XX(i, 0) = dot(X(i), X(0), n);
+    g.XF(i, 0) = dot(X(i), W(1), n);
+    g.Xw[i] = dot(X(i), w_.data() + t0_, n);
+  }
+  for (int j = 0; j + 1 < L; ++j)
+    for (int i = j; i + 1 < L; ++i) g.XX(i + 1, j + 1) = g.XX(i, j) + ends(X(i), X(j));
+  g.XX.triangularView<Eigen::StrictlyUpper>() = g.XX.transpose();
+  for (int m = 2; m <= na; ++m) {
+    g.XF(0, m - 1) = dot(X(0), W(m), n);
+    for (int i = 0; i + 1 < L; ++i) g.XF(i + 1, m - 1) = g.XF(i, m - 2) + ends(X(i), W(m - 1));
+  }
+  if (!opt_.drift) {
+    g.XF(0, na) = dot(X(0), F_.data() + static_cast<std::size_t>(na) * n, n);
+    for (int i = 0; i + 1 < L; ++i) g.XF(i + 1, na) = g.XF(i, na) + X(i)[-1] - X(i)[n - 1];
+    return g;
+  }
+  // The hats: sample k weighs 1 - frac on its interval's left knot and frac on the right one, as
+  // the constructor's columns of F.
+  g.XF.rightCols(nfixed_ - na).setZero();
+  for (int i = 0; i < L; ++i) {
+    const double* xi = X(i);
+    for (std::size_t k0 = 0, j = static_cast<std::size_t>(na); k0 < n; k0 += h_, ++j) {
+      double left = 0.0, right = 0.0;
+      for (std::size_t k = k0; k < std::min(k0 + h_, n); ++k) {
+        const double frac = hat_frac_[k];
+        left += xi[k] * (1.0 - frac);
+        if (frac > 0) right += xi[k] * frac;
+      }
+      g.XF(i, static_cast<Eigen::Index>(j)) += left;
+      if (j + 1 < static_cast<std::size_t>(nfixed_))
+        g.XF(i, static_cast<Eigen::Index>(j + 1)) += right;
+    }
+  }
+  return g;
+}
+
+ArxEstimator::Gram ArxEstimator::dense_blocks(const std::vector<double>& x) const {
   const auto n = static_cast<Eigen::Index>(end_ - t0_);
   Eigen::MatrixXd X(n, lags_);
   for (int j = 0; j < lags_; ++j) {
