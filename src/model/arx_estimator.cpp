@@ -35,6 +35,12 @@ struct SseWindow {
 
 namespace {
 
+// A load at a sample a fraction frac past knot `left` towards knot `right` (the hat functions).
+// One expression for every place that makes it: their sums agree to the bit.
+inline double hat_load(double left, double right, double frac) {
+  return left * (1.0 - frac) + (frac > 0 ? right * frac : 0.0);
+}
+
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
@@ -138,7 +144,7 @@ void simulated_sse4(const std::array<SseWindow, 4>& w, double bound, double* out
       for (std::size_t l = 0; l < 4; ++l) {
         double s;
         if constexpr (Load)
-          s = left[l] * (1.0 - fk) + (fk > 0 ? right[l] * fk : 0.0);
+          s = hat_load(left[l], right[l], fk);
         else
           s = c[l];
         for (std::size_t i = 0; i < NA; ++i) s -= a[l][i] * past[l][i];
@@ -260,6 +266,7 @@ ArxEstimator::ArxEstimator(std::vector<double> y, const LinearOptions& opt)
 ArxEstimator::Gram ArxEstimator::x_blocks(const std::vector<double>& x) const {
   if (x.size() != y_.size())
     throw std::invalid_argument("valve position and output differ in length");
+  if (opt_.plain_scan) return dense_blocks(x);
   // Column i of X is x lagged by lag0_ + i over the window, X_i[k] = x[t0_ + k - lag0_ - i], and
   // column i + 1 is column i one sample later. So X'X is Toeplitz up to the window's two ends:
   // XX(i + 1, j + 1) = XX(i, j) + X_i[-1] X_j[-1] - X_i[n-1] X_j[n-1], and likewise X' against
@@ -267,7 +274,6 @@ ArxEstimator::Gram ArxEstimator::x_blocks(const std::vector<double>& x) const {
   // functions of a load touch two knots per sample: O(n lags) in all, where the dense products
   // cost O(n lags (lags + columns of F)). (X_i[-1] exists: t0_ >= nk_max + nb_max, the
   // largest lag.)
-  if (opt_.plain_scan) return dense_blocks(x);
   const std::size_t n = end_ - t0_;
   const int L = lags_, na = opt_.range.na_max;
   const auto X = [&](int i) { return x.data() + t0_ - static_cast<std::size_t>(lag0_ + i); };
@@ -592,7 +598,7 @@ std::vector<double> ArxEstimator::drift_series(const LinearFit& f) const {
     const std::size_t k = std::min(t, end_ - 1) - t0_;
     const std::size_t j = k / h_;
     const double frac = static_cast<double>(k - j * h_) / static_cast<double>(h_);
-    d[t] = f.drift_knots[j] * (1.0 - frac) + (frac > 0 ? f.drift_knots[j + 1] * frac : 0.0);
+    d[t] = hat_load(f.drift_knots[j], frac > 0 ? f.drift_knots[j + 1] : 0.0, frac);
   }
   return d;
 }
@@ -616,10 +622,8 @@ SseWindow ArxEstimator::window(const LinearFit& f, const std::vector<double>& x,
     const std::size_t n = end_ - t0_, knots = f.drift_knots.size();
     for (std::size_t j = 0, k0 = 0; k0 < n; ++j, k0 += h_) {
       const double left = f.drift_knots[j], right = j + 1 < knots ? f.drift_knots[j + 1] : 0.0;
-      for (std::size_t k = k0; k < std::min(k0 + h_, n); ++k) {
-        const double frac = hat_frac_[k];
-        buf[t0_ + k] = left * (1.0 - frac) + (frac > 0 ? right * frac : 0.0);
-      }
+      for (std::size_t k = k0; k < std::min(k0 + h_, n); ++k)
+        buf[t0_ + k] = hat_load(left, right, hat_frac_[k]);
     }
     d = buf.data();
   }

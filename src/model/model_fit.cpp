@@ -76,6 +76,10 @@ struct Search {
       th[i] = coords[i].lower + std::clamp(z[i], 0.0, 1.0) * (coords[i].upper - coords[i].lower);
     return th;
   }
+  // The unit-box coordinate i of a parameter value (theta's inverse, clamped to the box).
+  double coordinate(std::size_t i, double value) const {
+    return std::clamp((value - coords[i].lower) / (coords[i].upper - coords[i].lower), 0.0, 1.0);
+  }
   ValveChain chain(const double* z) const {
     const auto th = theta(z);
     std::vector<ValveEffect> blocks;
@@ -294,41 +298,6 @@ nlopt_result search_space(Search& s, const ModelFitOptions& opt) {
   return results[winner];
 }
 
-// A travel limit must earn its place on the estimation data, as a bigger ARX structure must
-// (LinearOptions::parsimony_percent). One that the valve never reaches there, or barely, leaves
-// the estimation fit flat, so the search stops anywhere between the data's reach and the edge of
-// the OP range, and the held-out part, when it goes further, is clipped there by chance
-// (measured: one simulated saturation loop got a lower limit of 48.5 or 45.5 % from rounding
-// alone, and 36 or 83 % held-out fitness; the true limit was 5 %). A limit whose removal costs
-// less than that many points of estimation fitness goes to the edge of the record's OP range: no
-// clip the estimation data does not show.
-void widen_unsupported_limits(const Search& s, std::vector<double>& z) {
-  const double window = s.est.options().parsimony_percent;
-  const auto fitness = [&](const std::vector<double>& at) {
-    const LinearFit f = s.est.fit(s.valve_position(at.data()));
-    return f.ok ? f.fitness_percent : -std::numeric_limits<double>::infinity();
-  };
-  for (std::size_t k = 0; k < s.effects.size(); ++k) {
-    if (s.effects[k].name != "saturation") continue;
-    const std::size_t lo = s.offset[k], share = lo + 1;  // lower, upper's share of [lower, umax]
-    const double kept = fitness(z);
-    // The lower limit to umin with the upper one where it is, then the upper one to umax.
-    std::vector<double> wide = z;
-    const std::vector<double> th = s.theta(z.data());
-    const double upper =
-        std::get<Saturation>(make_valve_block(s.effects[k], th.data() + lo, s.range)).upper();
-    const double r = s.range.umax - s.range.umin;
-    wide[lo] = 0.0;
-    wide[share] = std::clamp(((r > 0 ? (upper - s.range.umin) / r : 1.0) - s.coords[share].lower) /
-                                 (s.coords[share].upper - s.coords[share].lower),
-                             0.0, 1.0);
-    if (fitness(wide) >= kept - window) z = wide;
-    wide = z;
-    wide[share] = 1.0;
-    if (fitness(wide) >= kept - window) z = wide;
-  }
-}
-
 // Coordinates at which every effect is absent (x = u): zero bands, limits at the OP range,
 // zero curvature, zero lag.
 std::vector<double> neutral_point(const Search& s) {
@@ -339,6 +308,41 @@ std::vector<double> neutral_point(const Search& s) {
     if (e.name == "characteristic" && e.variant == "auto") z[s.offset[k]] = 0.5;
   }
   return z;
+}
+
+// A travel limit must earn its place on the estimation data, as a bigger ARX structure must
+// (LinearOptions::parsimony_percent). One that the valve never reaches there, or barely, leaves
+// the estimation fit flat, so the search stops anywhere between the data's reach and the edge of
+// the OP range, and the held-out part, when it goes further, is clipped there by chance
+// (measured: one simulated saturation loop got a lower limit of 48.5 or 45.5 % from rounding
+// alone, and 36 or 83 % held-out fitness; the true limit was 5 %). A limit whose removal costs
+// less than that many points of estimation fitness goes where neutral_point() puts it, the edge
+// of the record's OP range: no clip the estimation data does not show.
+void widen_unsupported_limits(const Search& s, std::vector<double>& z) {
+  const double window = s.est.options().parsimony_percent;
+  const std::vector<double> absent = neutral_point(s);
+  const auto fitness = [&](const std::vector<double>& at) {
+    const LinearFit f = s.est.fit(s.valve_position(at.data()));
+    return f.ok ? f.fitness_percent : -std::numeric_limits<double>::infinity();
+  };
+  for (std::size_t k = 0; k < s.effects.size(); ++k) {
+    if (s.effects[k].name != "saturation") continue;
+    const std::size_t lo = s.offset[k], share = lo + 1;  // lower, upper's share of [lower, umax]
+    const double kept = fitness(z);
+    // The lower limit removed with the upper one where it is (its share of the wider span), then
+    // the upper one removed.
+    std::vector<double> wide = z;
+    const std::vector<double> th = s.theta(z.data());
+    const double upper =
+        std::get<Saturation>(make_valve_block(s.effects[k], th.data() + lo, s.range)).upper();
+    const double r = s.range.umax - s.range.umin;
+    wide[lo] = absent[lo];
+    wide[share] = s.coordinate(share, r > 0 ? (upper - s.range.umin) / r : 1.0);
+    if (fitness(wide) >= kept - window) z = wide;
+    wide = z;
+    wide[share] = absent[share];
+    if (fitness(wide) >= kept - window) z = wide;
+  }
 }
 
 std::vector<double> difference(const std::vector<double>& y) {
