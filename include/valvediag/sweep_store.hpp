@@ -15,9 +15,14 @@
 
 namespace valvediag {
 
+// Version of the sweep tables this build writes; older databases are migrated when opened,
+// newer ones refused.
+inline constexpr int kSweepSchemaVersion = 2;
+
 struct TrendPoint {
   std::int64_t sweep = 0;
   std::string started_utc;
+  double validation_fraction = 0.3;  // held out for scoring: fitness compares only at equal share
   LoopAssessment result;
 };
 

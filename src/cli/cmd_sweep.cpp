@@ -563,8 +563,10 @@ void add_trend(CLI::App& app, int& exit_code) {
       if (points.empty()) throw UsageError(a->db + ": no sweep assessed loop '" + name + "'");
       std::cout << name << ":\n";
       char line[256];
-      std::snprintf(line, sizeof line, "  %-6s %-20s %-19s %8s %8s %9s %8s %8s\n", "sweep",
-                    "started", "verdict", "stiction", "val fit", "period s", "rev/h", "travel/h");
+      // "held": the share held out for scoring; validation fitness compares at equal shares.
+      std::snprintf(line, sizeof line, "  %-6s %-20s %-19s %8s %8s %5s %9s %8s %8s\n", "sweep",
+                    "started", "verdict", "stiction", "val fit", "held", "period s", "rev/h",
+                    "travel/h");
       std::cout << line;
       for (const auto& p : points) {
         const auto& r = p.result;
@@ -574,9 +576,10 @@ void add_trend(CLI::App& app, int& exit_code) {
           std::snprintf(b, sizeof b, "%.*f", prec, v);
           return std::string(b);
         };
-        std::snprintf(line, sizeof line, "  %-6lld %-20s %-19s %8s %8s %9s %8s %8s\n",
+        std::snprintf(line, sizeof line, "  %-6lld %-20s %-19s %8s %8s %5s %9s %8s %8s\n",
                       static_cast<long long>(p.sweep), p.started_utc.c_str(), r.verdict.c_str(),
                       f(r.stiction_percent, 2).c_str(), f(r.validation_fitness_percent, 1).c_str(),
+                      f(p.validation_fraction, 2).c_str(),
                       r.health.oscillating ? f(r.health.period_s, 0).c_str() : "-",
                       f(r.health.op_reversals_per_hour, 0).c_str(),
                       f(r.health.op_travel_percent_per_hour, 0).c_str());

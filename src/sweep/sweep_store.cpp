@@ -2,13 +2,18 @@
 
 #include <sqlite3.h>
 
+#include <cmath>
+#include <optional>
 #include <stdexcept>
+#include <string>
 
 namespace valvediag {
 
 namespace {
 
-const char* kSchema = R"sql(
+// Version 1 of the sweep tables, as the first release wrote them. Later versions are reached by
+// the migrations in migrate(), so a fresh database and an old one take the same path.
+const char* kSchemaV1 = R"sql(
 CREATE TABLE IF NOT EXISTS sweeps(
   id INTEGER PRIMARY KEY,
   started_utc TEXT NOT NULL,
@@ -37,6 +42,12 @@ CREATE TABLE IF NOT EXISTS sweep_results(
   result_json TEXT NOT NULL,
   PRIMARY KEY(sweep_id, loop));
 )sql";
+
+// The recorder keeps its own tables in the same file, so PRAGMA user_version (one per file)
+// cannot version ours: each component has a row here.
+const char* kVersions =
+    "CREATE TABLE IF NOT EXISTS schema_versions(component TEXT PRIMARY KEY, version INTEGER NOT "
+    "NULL)";
 
 sqlite3* open_db(const std::string& path, int flags) {
   sqlite3* db = nullptr;
@@ -71,14 +82,54 @@ struct SweepStore::Impl {
     if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK) fail("SQL");
     return s;
   }
+  // The first integer column of the first row of `sql`, or nullopt for no row.
+  std::optional<std::int64_t> integer(const char* sql) const {
+    sqlite3_stmt* s = prepare(sql);
+    std::optional<std::int64_t> v;
+    if (sqlite3_step(s) == SQLITE_ROW) v = sqlite3_column_int64(s, 0);
+    sqlite3_finalize(s);
+    return v;
+  }
+  void migrate() const;
 };
+
+// Brings the sweep tables to kSweepSchemaVersion inside one transaction: two sweeps opening an
+// old database at once migrate it once, and a failed step leaves it as it was.
+void SweepStore::Impl::migrate() const {
+  exec("BEGIN IMMEDIATE");
+  try {
+    exec(kVersions);
+    auto v = integer("SELECT version FROM schema_versions WHERE component = 'sweeps'");
+    if (!v)  // databases from before versioning have the version-1 tables
+      v = integer("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'sweeps'")
+              .value_or(0);
+    if (*v > kSweepSchemaVersion)
+      throw std::runtime_error(path + ": its sweep tables are version " + std::to_string(*v) +
+                               ", written by a newer valvediag; this one reads up to version " +
+                               std::to_string(kSweepSchemaVersion) +
+                               ": update valvediag or use another --db");
+    if (*v < 1) exec(kSchemaV1);
+    // Version 2: the share of each record held out for scoring (sweep --validate). Sweeps
+    // before the option all held out 0.3.
+    if (*v < 2)
+      exec("ALTER TABLE sweeps ADD COLUMN validate REAL; UPDATE sweeps SET validate = 0.3");
+    if (*v < kSweepSchemaVersion)
+      exec(("INSERT OR REPLACE INTO schema_versions(component, version) VALUES('sweeps', " +
+            std::to_string(kSweepSchemaVersion) + ")")
+               .c_str());
+    exec("COMMIT");
+  } catch (...) {
+    sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
+    throw;
+  }
+}
 
 SweepStore::SweepStore(const std::string& db_path) : impl_(std::make_unique<Impl>()) {
   impl_->path = db_path;
   impl_->db = open_db(db_path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
   try {
     impl_->exec("PRAGMA journal_mode=WAL");
-    impl_->exec(kSchema);
+    impl_->migrate();
   } catch (...) {
     sqlite3_close(impl_->db);
     throw;
@@ -90,12 +141,14 @@ SweepStore::~SweepStore() {
 }
 
 std::int64_t SweepStore::begin_sweep(const SweepInfo& info) {
-  sqlite3_stmt* s =
-      impl_->prepare("INSERT INTO sweeps(started_utc, source, shard, window_s) VALUES(?, ?, ?, ?)");
+  sqlite3_stmt* s = impl_->prepare(
+      "INSERT INTO sweeps(started_utc, source, shard, window_s, validate) "
+      "VALUES(?, ?, ?, ?, ?)");
   sqlite3_bind_text(s, 1, info.started_utc.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(s, 2, info.source.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(s, 3, info.shard.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_double(s, 4, info.window_s);
+  sqlite3_bind_double(s, 5, info.validation_fraction);
   const int rc = sqlite3_step(s);
   sqlite3_finalize(s);
   if (rc != SQLITE_DONE) impl_->fail("cannot start the sweep");
@@ -152,7 +205,8 @@ void SweepStore::end_sweep(std::int64_t sweep, const SweepInfo& info, const std:
 
 std::vector<TrendPoint> SweepStore::trend(const std::string& loop, int last) {
   sqlite3_stmt* s = impl_->prepare(
-      "SELECT r.sweep_id, w.started_utc, r.result_json FROM sweep_results r JOIN sweeps w ON "
+      "SELECT r.sweep_id, w.started_utc, r.result_json, w.validate FROM sweep_results r JOIN "
+      "sweeps w ON "
       "w.id = r.sweep_id WHERE r.loop = ? ORDER BY r.sweep_id DESC LIMIT ?");
   sqlite3_bind_text(s, 1, loop.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_int(s, 2, last);
@@ -161,6 +215,7 @@ std::vector<TrendPoint> SweepStore::trend(const std::string& loop, int last) {
     TrendPoint p;
     p.sweep = sqlite3_column_int64(s, 0);
     p.started_utc = reinterpret_cast<const char*>(sqlite3_column_text(s, 1));
+    p.validation_fraction = sqlite3_column_double(s, 3);
     const auto* js = reinterpret_cast<const char*>(sqlite3_column_text(s, 2));
     try {
       p.result = assessment_from_json(nlohmann::json::parse(js ? js : ""));

@@ -1,6 +1,7 @@
 // One loop's assessment on simulated loops with a known answer, the results' JSON round trip,
 // ranking, the results store's trend, and the isolated job runner (time limit, crash, exception).
 #include <doctest/doctest.h>
+#include <sqlite3.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -236,6 +237,76 @@ TEST_CASE("the results store keeps each sweep and gives a loop's trend, oldest f
   CHECK(again.trend("NOPE").empty());
   CHECK(again.assessed_loops() == std::vector<std::string>{"FIC101"});
   CHECK(!recorded_end_s(db.string(), "FIC101"));  // no recording tables: an error, not a guess
+}
+
+namespace {
+void exec_sql(const fs::path& db, const std::string& sql) {
+  sqlite3* h = nullptr;
+  REQUIRE(sqlite3_open(db.c_str(), &h) == SQLITE_OK);
+  char* err = nullptr;
+  const int rc = sqlite3_exec(h, sql.c_str(), nullptr, nullptr, &err);
+  const std::string msg = err ? err : "";
+  sqlite3_free(err);
+  sqlite3_close(h);
+  REQUIRE_MESSAGE(rc == SQLITE_OK, msg);
+}
+}  // namespace
+
+TEST_CASE("the results store migrates a database of the first release and refuses a newer one") {
+  const TempDb tmp(fs::temp_directory_path() /
+                   ("valvediag-migrate-" + std::to_string(::getpid()) + ".sqlite"));
+  const fs::path& db = tmp.path;
+  // The tables as the first release wrote them (no version row, no validate column), with a
+  // recording table beside them as on a site database.
+  exec_sql(db, R"sql(
+    CREATE TABLE runs(id INTEGER PRIMARY KEY, started_utc TEXT NOT NULL);
+    CREATE TABLE sweeps(id INTEGER PRIMARY KEY, started_utc TEXT NOT NULL, finished_utc TEXT,
+      source TEXT, shard TEXT, window_s REAL, status TEXT NOT NULL DEFAULT 'running');
+    CREATE TABLE sweep_results(sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
+      loop TEXT NOT NULL, verdict TEXT NOT NULL, severity REAL, stiction_percent REAL,
+      slip_jump_percent REAL, model TEXT, fitness_percent REAL, validation_fitness_percent REAL,
+      first_missing TEXT, oscillating INTEGER, period_s REAL, op_reversals_per_hour REAL,
+      op_travel_percent_per_hour REAL, time_at_limits_percent REAL, error TEXT,
+      result_json TEXT NOT NULL, PRIMARY KEY(sweep_id, loop));
+    INSERT INTO sweeps(started_utc, status) VALUES('2026-10-01T02:00:00Z', 'done');)sql");
+  LoopAssessment old;
+  old.loop = "FIC101";
+  old.verdict = "stiction";
+  old.stiction_percent = 2.5;
+  exec_sql(db,
+           "INSERT INTO sweep_results(sweep_id, loop, verdict, result_json) VALUES(1, "
+           "'FIC101', 'stiction', '" +
+               assessment_json(old).dump() + "')");
+  {
+    SweepStore store(db.string());  // migrates
+    SweepInfo info;
+    info.started_utc = "2026-11-27T02:00:00Z";
+    info.validation_fraction = 0.4;
+    const auto id = store.begin_sweep(info);
+    LoopAssessment a = old;
+    a.stiction_percent = 3.0;
+    store.add_result(id, a);
+    store.end_sweep(id, info, "done");
+    const auto t = store.trend("FIC101");
+    REQUIRE(t.size() == 2);
+    CHECK(t[0].result.stiction_percent == 2.5);  // the old result survived the migration
+    CHECK(t[0].validation_fraction == 0.3);      // the only share the first release held out
+    CHECK(t[1].validation_fraction == 0.4);
+  }
+  {
+    SweepStore again(db.string());  // already current: opening changes nothing
+    CHECK(again.trend("FIC101").size() == 2);
+  }
+  exec_sql(db, "UPDATE schema_versions SET version = 99 WHERE component = 'sweeps'");
+  try {
+    SweepStore newer(db.string());
+    FAIL("a database from a newer release was opened");
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    CHECK(m.find(db.string()) != std::string::npos);
+    CHECK(m.find("version 99, written by a newer valvediag") != std::string::npos);
+    CHECK(m.find("update valvediag") != std::string::npos);
+  }
 }
 
 TEST_CASE("isolated jobs: results, exceptions, crashes and time limits stay with their job") {
