@@ -5,8 +5,8 @@
 #include <complex>
 #include <cstdio>
 #include <numeric>
-#include <unsupported/Eigen/FFT>
 
+#include "valvediag/autocorrelation.hpp"
 #include "valvediag/text_stats.hpp"
 
 namespace valvediag {
@@ -14,28 +14,6 @@ namespace valvediag {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-
-// Normalised autocorrelation of x about its mean for lags 0..N-1, through one FFT (zero-padded:
-// no wrap-around). Empty for a constant signal.
-std::vector<double> autocorrelation(const std::vector<double>& x) {
-  const std::size_t N = x.size();
-  const double mean = std::accumulate(x.begin(), x.end(), 0.0) / static_cast<double>(N);
-  std::size_t n = 1;
-  while (n < 2 * N) n <<= 1;
-  std::vector<double> padded(n, 0.0);
-  for (std::size_t k = 0; k < N; ++k) padded[k] = x[k] - mean;
-  Eigen::FFT<double> fft;
-  std::vector<std::complex<double>> X;
-  fft.fwd(X, padded);
-  for (auto& c : X) c = std::norm(c);
-  std::vector<double> r;
-  fft.inv(r, X);
-  r.resize(N);
-  const double r0 = r[0];
-  if (!(r0 > 0)) return {};
-  for (auto& v : r) v /= r0;
-  return r;
-}
 
 // Complex amplitude of x[b, b+n) at `period` samples about its mean. A sine of amplitude A gives
 // |result| = A over whole cycles. (No straight line is removed: over two periods a line takes

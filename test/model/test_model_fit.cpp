@@ -189,8 +189,10 @@ TEST_CASE("a travel limit the estimation part never reaches is left at the recor
   // 38 % in the held-out part. The estimation fit is flat in any lower limit under 49 %: where the
   // search stopped decided the held-out fitness (36 % or 83 %, from rounding alone). On seed 1 a
   // limit at 49.5 % clipped a few estimation samples for 0.014 points of fitness and the held-out
-  // part to 16 % fitness.
-  for (const std::uint64_t seed : {1u, 3u}) {
+  // part to 16 % fitness. On seeds 2, 5 and 6 a limit at 50 % clipped OP's wander while the loop
+  // regulated at 50 %, 0.12-0.29 points above the parsimony window but no more than a slow load's
+  // residual gives by chance (widen_unsupported_limits): 14-17 % held out.
+  for (const std::uint64_t seed : {1u, 2u, 3u, 5u, 6u}) {
     CAPTURE(seed);
     const LoopData d = scenario_data("saturation", seed);
     const ModelFit f = fit(d, "saturation", split());
