@@ -101,8 +101,12 @@ class ArxEstimator {
   // One structure, fitted and simulated to the end.
   LinearFit solve(const Gram& g, const ArxStructure& s, const std::vector<double>& x) const;
   // a, b and c (or the load's knots) of structure s by least squares; false when the normal
-  // equations fail or A is unstable.
+  // equations fail or A is unstable. The plain scan solves all columns at once; the search,
+  // reduced_coefficients(), the lags only, with the tail eliminated by tail().
   bool coefficients(const Gram& g, const ArxStructure& s, LinearFit& f) const;
+  bool reduced_coefficients(const Gram& g, const ArxStructure& s, LinearFit& f) const;
+  void tail(Gram& g) const;
+  double ridge(const Gram& g) const;
   // Sets f's sse and fitness and marks it ok when sse is finite and within bound.
   void score(LinearFit& f, double sse, double bound) const;
   // The simulated output's SSE over the estimation window.

@@ -3,6 +3,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <tuple>
 
@@ -200,9 +201,36 @@ auto with_orders(std::size_t na, std::size_t nb, F&& f) {
 
 }  // namespace
 
+namespace {
+// The normal equations M th = r (ridge included) by LDLT; nullopt when it fails or th is not
+// finite.
+std::optional<Eigen::VectorXd> solve_normal(const Eigen::MatrixXd& M, const Eigen::VectorXd& r) {
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(M);
+  if (ldlt.info() != Eigen::Success) return std::nullopt;
+  Eigen::VectorXd th = ldlt.solve(r);
+  if (!th.allFinite()) return std::nullopt;
+  return th;
+}
+
+// a and b from the first na + nb entries of th (A's coefficients enter with their sign flipped).
+void set_lags(LinearFit& f, const Eigen::VectorXd& th, int na, int nb) {
+  f.a.resize(static_cast<std::size_t>(na));
+  f.b.resize(static_cast<std::size_t>(nb));
+  for (int i = 0; i < na; ++i) f.a[static_cast<std::size_t>(i)] = -th[i];
+  for (int k = 0; k < nb; ++k) f.b[static_cast<std::size_t>(k)] = th[na + k];
+}
+}  // namespace
+
 struct ArxEstimator::Gram {
   Eigen::MatrixXd XX, XF;
   Eigen::VectorXd Xw;
+  // The tail (the constant or the load's hats) eliminated once for every structure (tail()):
+  // C = the tail's cross products with every candidate regressor (w lags 1..na_max, then the x
+  // lags), T = its own block plus the ridge, Z = T^-1 C, G = C' Z, z = T^-1 (tail' w), v = C' z.
+  double rho = 0.0;
+  Eigen::MatrixXd Z, G;
+  Eigen::VectorXd z, v;
+  bool tail_ok = false;
 };
 
 ArxEstimator::ArxEstimator(std::vector<double> y, const LinearOptions& opt)
@@ -300,6 +328,7 @@ ArxEstimator::Gram ArxEstimator::x_blocks(const std::vector<double>& x) const {
   if (!opt_.drift) {
     g.XF(0, na) = dot(X(0), F_.data() + static_cast<std::size_t>(na) * n, n);
     for (int i = 0; i + 1 < L; ++i) g.XF(i + 1, na) = g.XF(i, na) + X(i)[-1] - X(i)[n - 1];
+    tail(g);
     return g;
   }
   // The hats: sample k weighs 1 - frac on its interval's left knot and frac on the right one, as
@@ -319,7 +348,46 @@ ArxEstimator::Gram ArxEstimator::x_blocks(const std::vector<double>& x) const {
         g.XF(i, static_cast<Eigen::Index>(j + 1)) += right;
     }
   }
+  tail(g);
   return g;
+}
+
+// A valve that never moves makes its lags collinear with c: a tiny ridge keeps the normal
+// equations definite. 1e-10 of the largest diagonal entry over every candidate column (not only
+// the structure's), so that all structures of one valve position are regularised alike and the
+// tail can be eliminated once for all of them.
+double ArxEstimator::ridge(const Gram& g) const {
+  double big = 0.0;
+  for (int i = 0; i < nfixed_; ++i)
+    big = std::max(big, std::abs(FF_[static_cast<std::size_t>(i * nfixed_ + i)]));
+  for (int i = 0; i < lags_; ++i) big = std::max(big, std::abs(g.XX(i, i)));
+  return 1e-10 * big + 1e-300;
+}
+
+// Block elimination of the tail columns, shared by every structure of one valve position: a
+// structure then solves only for its na + nb lag coefficients (the Schur complement, looked up
+// from G), where one LDLT of all its columns cost O((na + nb + knots)^3) per structure.
+void ArxEstimator::tail(Gram& g) const {
+  const int na = opt_.range.na_max, K = nfixed_ - na, L = lags_;
+  Eigen::MatrixXd T(K, K);
+  Eigen::MatrixXd C(K, na + L);
+  Eigen::VectorXd tw(K);
+  g.rho = ridge(g);
+  for (int a = 0; a < K; ++a) {
+    for (int b = 0; b < K; ++b)
+      T(a, b) = FF_[static_cast<std::size_t>((na + a) * nfixed_ + na + b)];
+    T(a, a) += g.rho;
+    for (int i = 0; i < na; ++i) C(a, i) = FF_[static_cast<std::size_t>(i * nfixed_ + na + a)];
+    for (int i = 0; i < L; ++i) C(a, na + i) = g.XF(i, na + a);
+    tw[a] = Fw_[static_cast<std::size_t>(na + a)];
+  }
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(T);
+  g.tail_ok = ldlt.info() == Eigen::Success;
+  if (!g.tail_ok) return;
+  g.Z = ldlt.solve(C);
+  g.z = ldlt.solve(tw);
+  g.G = C.transpose() * g.Z;
+  g.v = C.transpose() * g.z;
 }
 
 ArxEstimator::Gram ArxEstimator::dense_blocks(const std::vector<double>& x) const {
@@ -341,6 +409,7 @@ ArxEstimator::Gram ArxEstimator::dense_blocks(const std::vector<double>& x) cons
 }
 
 bool ArxEstimator::coefficients(const Gram& g, const ArxStructure& s, LinearFit& f) const {
+  if (!opt_.plain_scan) return reduced_coefficients(g, s, f);
   f = LinearFit{};
   f.structure = s;
   const int na = s.na, nb = s.nb;
@@ -371,21 +440,62 @@ bool ArxEstimator::coefficients(const Gram& g, const ArxStructure& s, LinearFit&
       M(i, j) = M(j, i) = v;
     }
   }
-  // A valve that never moves makes its lags collinear with c: a tiny ridge keeps LDLT defined.
-  M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
-  Eigen::LDLT<Eigen::MatrixXd> ldlt(M);
-  if (ldlt.info() != Eigen::Success) return false;
-  const Eigen::VectorXd th = ldlt.solve(r);
-  if (!th.allFinite()) return false;
-  f.a.resize(static_cast<std::size_t>(na));
-  f.b.resize(static_cast<std::size_t>(nb));
-  for (int i = 0; i < na; ++i) f.a[static_cast<std::size_t>(i)] = -th[i];
-  for (int k = 0; k < nb; ++k) f.b[static_cast<std::size_t>(k)] = th[na + k];
+  M.diagonal().array() += ridge(g);
+  const auto sol = solve_normal(M, r);
+  if (!sol) return false;
+  const Eigen::VectorXd& th = *sol;
+  set_lags(f, th, na, nb);
   if (opt_.drift) {
     f.drift_knots.assign(th.data() + na + nb, th.data() + p);
   } else {
     f.c = th[na + nb];
   }
+  return stable(f.a);
+}
+
+bool ArxEstimator::reduced_coefficients(const Gram& g, const ArxStructure& s, LinearFit& f) const {
+  f = LinearFit{};
+  f.structure = s;
+  if (!g.tail_ok) return false;
+  const int na = s.na, nb = s.nb, q = na + nb;
+  const int na_max = opt_.range.na_max;
+  // Candidate index of each lag column (into C, G and Z): w lag i, then x lag nk + 1 + k.
+  std::vector<int> c(static_cast<std::size_t>(q));
+  for (int i = 0; i < na; ++i) c[static_cast<std::size_t>(i)] = i;
+  for (int k = 0; k < nb; ++k) c[static_cast<std::size_t>(na + k)] = na_max + s.nk + 1 + k - lag0_;
+  // The lag block of the normal equations, its right-hand side, both less the tail's share.
+  Eigen::MatrixXd S(q, q);
+  Eigen::VectorXd r(q);
+  for (int i = 0; i < q; ++i) {
+    const int ci = c[static_cast<std::size_t>(i)];
+    const bool wi = i < na;
+    r[i] = (wi ? Fw_[static_cast<std::size_t>(ci)] : g.Xw[ci - na_max]) - g.v[ci];
+    for (int j = 0; j <= i; ++j) {
+      const int cj = c[static_cast<std::size_t>(j)];
+      const bool wj = j < na;
+      double m;
+      if (wi && wj)
+        m = FF_[static_cast<std::size_t>(ci * nfixed_ + cj)];
+      else if (!wi && !wj)
+        m = g.XX(ci - na_max, cj - na_max);
+      else
+        m = wi ? g.XF(cj - na_max, ci) : g.XF(ci - na_max, cj);
+      S(i, j) = S(j, i) = m - g.G(ci, cj);
+    }
+    S(i, i) += g.rho;
+  }
+  const auto sol = solve_normal(S, r);
+  if (!sol) return false;
+  const Eigen::VectorXd& th = *sol;
+  set_lags(f, th, na, nb);
+  // The tail from the lags: z - Z th.
+  Eigen::VectorXd t = g.z;
+  for (int i = 0; i < q; ++i) t -= g.Z.col(c[static_cast<std::size_t>(i)]) * th[i];
+  if (!t.allFinite()) return false;
+  if (opt_.drift)
+    f.drift_knots.assign(t.data(), t.data() + t.size());
+  else
+    f.c = t[0];
   return stable(f.a);
 }
 

@@ -211,8 +211,9 @@ TEST_CASE("ArxEstimator: every near-best structure reaches the parsimony rule") 
 TEST_CASE("ArxEstimator: least-squares coefficients satisfy the normal equations") {
   // The Gram blocks come from shifted sums, not from the regressors: check the result against
   // regressors built here from their definition. With the estimator's ridge rho (1e-10 of the
-  // largest diagonal entry: (Phi'Phi + rho I) theta = Phi'w), the residual's inner product with
-  // regressor i is rho theta_i; a wrong Gram entry moves it far more.
+  // largest diagonal entry over every candidate column of the range: (Phi'Phi + rho I) theta =
+  // Phi'w), the residual's inner product with regressor i is rho theta_i; a wrong Gram entry
+  // moves it far more.
   int checked = 0;
   for (std::uint64_t seed = 1; seed <= 3; ++seed)
     for (const bool drift : {false, true})
@@ -286,6 +287,16 @@ TEST_CASE("ArxEstimator: least-squares coefficients satisfy the normal equations
             for (double v : phi[c]) pp[c] += v * v;
             rho = std::max(rho, 1e-10 * pp[c]);
           }
+          // The candidate lags outside the structure: w lags up to 3, x lags 1..16.
+          const auto lagged_sum = [&](const std::vector<double>& v, std::size_t lag) {
+            double sum = 0.0;
+            for (std::size_t t = t0; t < end; ++t) sum += v[t - lag] * v[t - lag];
+            return sum;
+          };
+          for (std::size_t lag = 1; lag <= 3; ++lag)
+            rho = std::max(rho, 1e-10 * lagged_sum(w, lag));
+          for (std::size_t lag = 1; lag <= 16; ++lag)
+            rho = std::max(rho, 1e-10 * lagged_sum(r.x, lag));
           for (std::size_t c = 0; c < p; ++c) {
             double pr = 0.0;
             for (std::size_t k = 0; k < resid.size(); ++k) pr += phi[c][k] * resid[k];
