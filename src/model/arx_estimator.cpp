@@ -199,9 +199,6 @@ auto with_orders(std::size_t na, std::size_t nb, F&& f) {
   return with_orders_from<1, 1>(na, nb, f);
 }
 
-}  // namespace
-
-namespace {
 // The normal equations M th = r (ridge included) by LDLT; nullopt when it fails or th is not
 // finite.
 std::optional<Eigen::VectorXd> solve_normal(const Eigen::MatrixXd& M, const Eigen::VectorXd& r) {

@@ -331,25 +331,24 @@ void widen_unsupported_limits(const Search& s, const std::vector<double>& y,
   constexpr double kChiSquare1Dof99 = 6.635;  // 99 % quantile of chi-square with 1 dof
   const double window = s.est.options().parsimony_percent;
   const std::vector<double> absent = neutral_point(s);
-  const auto fit = [&](const std::vector<double>& at) {
-    return s.est.fit(s.valve_position(at.data()));
-  };
+
   const auto fitness = [](const LinearFit& f) {
     return f.ok ? f.fitness_percent : -std::numeric_limits<double>::infinity();
   };
   for (std::size_t k = 0; k < s.effects.size(); ++k) {
     if (s.effects[k].name != "saturation") continue;
     const std::size_t lo = s.offset[k], share = lo + 1;  // lower, upper's share of [lower, umax]
-    const LinearFit kept = fit(z);
+    const std::vector<double> x = s.valve_position(z.data());
+    const LinearFit kept = s.est.fit(x);
     double samples = 0.0;  // effective, from the kept model's simulated residual
     if (kept.ok) {
-      const std::vector<double> ys = s.est.simulate(kept, s.valve_position(z.data()));
+      const std::vector<double> ys = s.est.simulate(kept, x);
       std::vector<double> e;
       for (std::size_t t = s.est.start(); t < s.est.end(); ++t) e.push_back(y[t] - ys[t]);
       samples = effective_sample_size(e);
     }
     const auto unsupported = [&](const std::vector<double>& at) {
-      const LinearFit f = fit(at);
+      const LinearFit f = s.est.fit(s.valve_position(at.data()));
       if (fitness(f) >= fitness(kept) - window) return true;
       return kept.ok && f.ok && kept.sse > 0 &&
              samples * std::log(f.sse / kept.sse) < kChiSquare1Dof99;

@@ -205,9 +205,8 @@ void SweepStore::end_sweep(std::int64_t sweep, const SweepInfo& info, const std:
 
 std::vector<TrendPoint> SweepStore::trend(const std::string& loop, int last) {
   sqlite3_stmt* s = impl_->prepare(
-      "SELECT r.sweep_id, w.started_utc, r.result_json, w.validate FROM sweep_results r JOIN "
-      "sweeps w ON "
-      "w.id = r.sweep_id WHERE r.loop = ? ORDER BY r.sweep_id DESC LIMIT ?");
+      "SELECT r.sweep_id, w.started_utc, r.result_json, w.validate FROM sweep_results r "
+      "JOIN sweeps w ON w.id = r.sweep_id WHERE r.loop = ? ORDER BY r.sweep_id DESC LIMIT ?");
   sqlite3_bind_text(s, 1, loop.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_int(s, 2, last);
   std::vector<TrendPoint> out;
