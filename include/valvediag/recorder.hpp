@@ -20,6 +20,10 @@
 
 namespace valvediag {
 
+// Version of the recording tables this build writes and reads (schema_versions.hpp); a
+// database with newer ones is refused rather than misread.
+inline constexpr int kRecorderSchemaVersion = 1;
+
 // One stored sample tick of one loop.
 struct SampleRow {
   std::int64_t loop_id = 0;
@@ -50,6 +54,7 @@ class RecordingDb {
   struct Impl;
 
  private:
+  void open_tables(bool create);  // schema check or migration, once the file is open
   std::string path_;
   std::unique_ptr<Impl> impl_;
 };

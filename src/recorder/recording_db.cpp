@@ -10,6 +10,7 @@
 #include <type_traits>
 
 #include "valvediag/recorder.hpp"
+#include "valvediag/schema_versions.hpp"
 
 namespace valvediag {
 
@@ -45,6 +46,15 @@ CREATE TABLE IF NOT EXISTS gaps(
   last_tick INTEGER NOT NULL,
   reason TEXT NOT NULL);
 )sql";
+
+// Readers need recording tables this build understands.
+void require_recording(sqlite3* db, const std::string& path) {
+  const int v = schema_version(db, path, "recorder", "samples");
+  require_known_schema(path, "recording", v, kRecorderSchemaVersion);
+  if (v == 0)
+    throw std::runtime_error(
+        path + ": holds no recordings; record one with valvediag record --db " + path);
+}
 
 std::string utc_now() {
   const std::time_t t = std::time(nullptr);
@@ -94,9 +104,35 @@ RecordingDb::RecordingDb(const std::string& path, bool create)
     throw std::runtime_error(path + ": cannot open the database: " + m);
   }
   sqlite3_busy_timeout(impl_->db, 5000);
+  try {
+    open_tables(create);
+  } catch (...) {
+    sqlite3_close(impl_->db);
+    impl_->db = nullptr;
+    throw;
+  }
+}
+
+void RecordingDb::open_tables(bool create) {
   impl_->exec("PRAGMA journal_mode=WAL");
   impl_->exec("PRAGMA synchronous=NORMAL");
-  if (create) impl_->exec(kSchema);
+  if (!create) {
+    require_recording(impl_->db, path_);
+    return;
+  }
+  // One transaction: two recorders creating the tables at once create them once.
+  impl_->exec("BEGIN IMMEDIATE");
+  try {
+    const int v = schema_version(impl_->db, path_, "recorder", "samples");
+    require_known_schema(path_, "recording", v, kRecorderSchemaVersion);
+    if (v < 1) impl_->exec(kSchema);
+    // Files from before versioning get their row too.
+    set_schema_version(impl_->db, path_, "recorder", kRecorderSchemaVersion);
+    impl_->exec("COMMIT");
+  } catch (...) {
+    sqlite3_exec(impl_->db, "ROLLBACK", nullptr, nullptr, nullptr);
+    throw;
+  }
 }
 
 RecordingDb::~RecordingDb() {
@@ -221,6 +257,7 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     sqlite3* c;
     ~Closer() { sqlite3_close(c); }
   } closer{c};
+  require_recording(c, db_path);
   auto prepare = [&](const char* sql) {
     sqlite3_stmt* s = nullptr;
     if (sqlite3_prepare_v2(c, sql, -1, &s, nullptr) != SQLITE_OK)

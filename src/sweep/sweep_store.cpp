@@ -3,9 +3,13 @@
 #include <sqlite3.h>
 
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
+
+#include "valvediag/recorder.hpp"
+#include "valvediag/schema_versions.hpp"
 
 namespace valvediag {
 
@@ -43,12 +47,6 @@ CREATE TABLE IF NOT EXISTS sweep_results(
   PRIMARY KEY(sweep_id, loop));
 )sql";
 
-// The recorder keeps its own tables in the same file, so PRAGMA user_version (one per file)
-// cannot version ours: each component has a row here.
-const char* kVersions =
-    "CREATE TABLE IF NOT EXISTS schema_versions(component TEXT PRIMARY KEY, version INTEGER NOT "
-    "NULL)";
-
 sqlite3* open_db(const std::string& path, int flags) {
   sqlite3* db = nullptr;
   if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
@@ -82,14 +80,6 @@ struct SweepStore::Impl {
     if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK) fail("SQL");
     return s;
   }
-  // The first integer column of the first row of `sql`, or nullopt for no row.
-  std::optional<std::int64_t> integer(const char* sql) const {
-    sqlite3_stmt* s = prepare(sql);
-    std::optional<std::int64_t> v;
-    if (sqlite3_step(s) == SQLITE_ROW) v = sqlite3_column_int64(s, 0);
-    sqlite3_finalize(s);
-    return v;
-  }
   void migrate() const;
 };
 
@@ -98,25 +88,14 @@ struct SweepStore::Impl {
 void SweepStore::Impl::migrate() const {
   exec("BEGIN IMMEDIATE");
   try {
-    exec(kVersions);
-    auto v = integer("SELECT version FROM schema_versions WHERE component = 'sweeps'");
-    if (!v)  // databases from before versioning have the version-1 tables
-      v = integer("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'sweeps'")
-              .value_or(0);
-    if (*v > kSweepSchemaVersion)
-      throw std::runtime_error(path + ": its sweep tables are version " + std::to_string(*v) +
-                               ", written by a newer valvediag; this one reads up to version " +
-                               std::to_string(kSweepSchemaVersion) +
-                               ": update valvediag or use another --db");
-    if (*v < 1) exec(kSchemaV1);
+    const int v = schema_version(db, path, "sweeps", "sweeps");
+    require_known_schema(path, "sweep", v, kSweepSchemaVersion);
+    if (v < 1) exec(kSchemaV1);
     // Version 2: the share of each record held out for scoring (sweep --validate). Sweeps
     // before the option all held out 0.3.
-    if (*v < 2)
+    if (v < 2)
       exec("ALTER TABLE sweeps ADD COLUMN validate REAL; UPDATE sweeps SET validate = 0.3");
-    if (*v < kSweepSchemaVersion)
-      exec(("INSERT OR REPLACE INTO schema_versions(component, version) VALUES('sweeps', " +
-            std::to_string(kSweepSchemaVersion) + ")")
-               .c_str());
+    if (v < kSweepSchemaVersion) set_schema_version(db, path, "sweeps", kSweepSchemaVersion);
     exec("COMMIT");
   } catch (...) {
     sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
@@ -239,33 +218,24 @@ std::vector<std::string> SweepStore::assessed_loops() {
 }
 
 std::optional<double> recorded_end_s(const std::string& db_path, const std::string& loop) {
-  sqlite3* db = open_db(db_path, SQLITE_OPEN_READONLY);
-  sqlite3_stmt* s = nullptr;
+  const std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_db(db_path, SQLITE_OPEN_READONLY),
+                                                       sqlite3_close);
+  const int version = schema_version(db.get(), db_path, "recorder", "samples");
+  require_known_schema(db_path, "recording", version, kRecorderSchemaVersion);
   // A database without recordings (only sweep results) has recorded nothing.
-  if (sqlite3_prepare_v2(db,
-                         "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'samples'",
-                         -1, &s, nullptr) == SQLITE_OK &&
-      sqlite3_step(s) != SQLITE_ROW) {
-    sqlite3_finalize(s);
-    sqlite3_close(db);
-    return std::nullopt;
-  }
-  sqlite3_finalize(s);
-  s = nullptr;
+  if (version == 0) return std::nullopt;
+  sqlite3_stmt* s = nullptr;
   const char* sql =
       "SELECT l.sample_period, (SELECT MAX(tick) FROM samples WHERE loop_id = l.id) FROM loops l "
       "WHERE l.name = ? ORDER BY l.run_id DESC LIMIT 1";
-  if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK) {
-    const std::string msg = sqlite3_errmsg(db);
-    sqlite3_close(db);
-    throw std::runtime_error(db_path + ": " + msg + " (is this a valvediag recording?)");
-  }
+  if (sqlite3_prepare_v2(db.get(), sql, -1, &s, nullptr) != SQLITE_OK)
+    throw std::runtime_error(db_path + ": " + sqlite3_errmsg(db.get()) +
+                             " (is this a valvediag recording?)");
   sqlite3_bind_text(s, 1, loop.c_str(), -1, SQLITE_TRANSIENT);
   std::optional<double> end;
   if (sqlite3_step(s) == SQLITE_ROW && sqlite3_column_type(s, 1) != SQLITE_NULL)
     end = (static_cast<double>(sqlite3_column_int64(s, 1)) + 1.0) * sqlite3_column_double(s, 0);
   sqlite3_finalize(s);
-  sqlite3_close(db);
   return end;
 }
 

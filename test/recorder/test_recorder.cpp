@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <thread>
 
 #include "../bus/bus_test_util.hpp"
@@ -403,4 +404,82 @@ TEST_CASE("short gaps are bridged by interpolation when asked; long ones still s
       read_recorded_loop(db, "loop-with-short-gaps", std::nullopt, std::nullopt, 0, false, 2),
       RecordingGapError);
   CHECK_THROWS_AS(read_recorded_loop(db, "loop-with-short-gaps", 0.0, 39.0), RecordingGapError);
+}
+
+namespace {
+void exec_sql(const std::string& db, const std::string& sql) {
+  sqlite3* c = nullptr;
+  REQUIRE(sqlite3_open(db.c_str(), &c) == SQLITE_OK);
+  char* err = nullptr;
+  const int rc = sqlite3_exec(c, sql.c_str(), nullptr, nullptr, &err);
+  const std::string msg = err ? err : "";
+  sqlite3_free(err);
+  sqlite3_close(c);
+  REQUIRE_MESSAGE(rc == SQLITE_OK, msg);
+}
+
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+}  // namespace
+
+TEST_CASE("recordings from before table versions stay readable; newer tables are refused") {
+  const std::string db = fresh_db("versions");
+  // The recording tables as the first release wrote them (no schema_versions), with a run.
+  exec_sql(db, R"sql(
+    CREATE TABLE runs(id INTEGER PRIMARY KEY, started_utc TEXT NOT NULL, ended_utc TEXT,
+      config_file TEXT, status TEXT NOT NULL DEFAULT 'recording');
+    CREATE TABLE loops(id INTEGER PRIMARY KEY, run_id INTEGER NOT NULL REFERENCES runs(id),
+      name TEXT NOT NULL, sample_period REAL NOT NULL, has_sp INTEGER NOT NULL,
+      has_mv INTEGER NOT NULL, has_mode INTEGER NOT NULL, UNIQUE(run_id, name));
+    CREATE TABLE samples(loop_id INTEGER NOT NULL, tick INTEGER NOT NULL, wall REAL NOT NULL,
+      lateness REAL NOT NULL, op REAL, pv REAL, sp REAL, mv REAL, mode REAL,
+      q_op INTEGER NOT NULL, q_pv INTEGER NOT NULL, q_sp INTEGER NOT NULL,
+      q_mv INTEGER NOT NULL, q_mode INTEGER NOT NULL, PRIMARY KEY(loop_id, tick)) WITHOUT ROWID;
+    CREATE TABLE gaps(loop_id INTEGER NOT NULL, first_tick INTEGER NOT NULL,
+      last_tick INTEGER NOT NULL, reason TEXT NOT NULL);
+    INSERT INTO runs(started_utc, status) VALUES('2026-10-01T02:00:00Z', 'done');
+    INSERT INTO loops(run_id, name, sample_period, has_sp, has_mv, has_mode)
+      VALUES(1, 'FIC101', 1.0, 0, 0, 0);)sql");
+  std::string rows;
+  for (int k = 0; k < 50; ++k)
+    rows += "INSERT INTO samples VALUES(1, " + std::to_string(k) + ", 0, 0, " +
+            std::to_string(k % 7) + ", " + std::to_string(2 * k) + ", NULL, NULL, NULL, 0, 0, 0, " +
+            "0, 0);";
+  exec_sql(db, rows);
+  CHECK(read_recorded_loop(db, "FIC101").rows == 50);  // read before any migration
+  {
+    RecordingDb rec(db);  // a new recording into the old file
+    const std::int64_t run = rec.begin_run("test");
+    CHECK(run == 2);
+    rec.end_run(run, "done");
+  }
+  CHECK(scalar(db, "SELECT version FROM schema_versions WHERE component = 'recorder'") ==
+        kRecorderSchemaVersion);
+  const RecordedLoop old = read_recorded_loop(db, "FIC101");
+  REQUIRE(old.rows == 50);  // nothing recorded before was lost
+  CHECK(old.data.pv[49] == 98.0);
+
+  exec_sql(db, "UPDATE schema_versions SET version = 99 WHERE component = 'recorder'");
+  for (const std::string& m :
+       {error_of([&] { RecordingDb rec(db); }), error_of([&] { RecordingDb rec(db, false); }),
+        error_of([&] { read_recorded_loop(db, "FIC101"); })}) {
+    CHECK(m.find(db) != std::string::npos);
+    CHECK(m.find("recording tables are version 99, written by a newer valvediag") !=
+          std::string::npos);
+    CHECK(m.find("update valvediag") != std::string::npos);
+  }
+  CHECK(scalar(db, "SELECT count(*) FROM runs") == 2);  // the refusal wrote nothing
+
+  // A site database that holds sweep results only has no recordings to read.
+  const std::string sweeps_only = fresh_db("sweeps-only");
+  exec_sql(sweeps_only, "CREATE TABLE sweeps(id INTEGER PRIMARY KEY)");
+  const std::string m = error_of([&] { read_recorded_loop(sweeps_only, "FIC101"); });
+  CHECK(m.find(sweeps_only + ": holds no recordings; record one with valvediag record") !=
+        std::string::npos);
 }

@@ -1,0 +1,77 @@
+#include "valvediag/schema_versions.hpp"
+
+#include <sqlite3.h>
+
+#include <optional>
+#include <stdexcept>
+
+namespace valvediag {
+
+namespace {
+
+// The first integer of the first row of `sql` with `text` bound to ?1, or nullopt for no row.
+std::optional<int> first_integer(sqlite3* db, const std::string& path, const char* sql,
+                                 const std::string& text) {
+  sqlite3_stmt* s = nullptr;
+  if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK)
+    throw std::runtime_error(path + ": reading the schema versions: " + sqlite3_errmsg(db));
+  sqlite3_bind_text(s, 1, text.c_str(), -1, SQLITE_TRANSIENT);
+  std::optional<int> v;
+  const int rc = sqlite3_step(s);
+  if (rc == SQLITE_ROW) v = sqlite3_column_int(s, 0);
+  sqlite3_finalize(s);
+  if (rc != SQLITE_ROW && rc != SQLITE_DONE)
+    throw std::runtime_error(path + ": reading the schema versions: " + sqlite3_errmsg(db));
+  return v;
+}
+
+bool has_table(sqlite3* db, const std::string& path, const std::string& table) {
+  return first_integer(db, path, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?1",
+                       table)
+      .has_value();
+}
+
+}  // namespace
+
+int schema_version(sqlite3* db, const std::string& path, const std::string& component,
+                   const std::string& first_table) {
+  if (has_table(db, path, "schema_versions"))
+    if (auto v = first_integer(db, path, "SELECT version FROM schema_versions WHERE component = ?1",
+                               component))
+      return *v;
+  return has_table(db, path, first_table) ? 1 : 0;
+}
+
+void set_schema_version(sqlite3* db, const std::string& path, const std::string& component,
+                        int version) {
+  auto fail = [&] {
+    throw std::runtime_error(path + ": recording the schema version: " + sqlite3_errmsg(db) +
+                             " (check the disk has space and the file is writable)");
+  };
+  if (sqlite3_exec(db,
+                   "CREATE TABLE IF NOT EXISTS schema_versions(component TEXT PRIMARY KEY, "
+                   "version INTEGER NOT NULL)",
+                   nullptr, nullptr, nullptr) != SQLITE_OK)
+    fail();
+  sqlite3_stmt* s = nullptr;
+  if (sqlite3_prepare_v2(
+          db, "INSERT OR REPLACE INTO schema_versions(component, version) VALUES(?1, ?2)", -1, &s,
+          nullptr) != SQLITE_OK)
+    fail();
+  sqlite3_bind_text(s, 1, component.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_int(s, 2, version);
+  const int rc = sqlite3_step(s);
+  sqlite3_finalize(s);
+  if (rc != SQLITE_DONE) fail();
+}
+
+void require_known_schema(const std::string& path, const std::string& tables, int found,
+                          int supported) {
+  if (found > supported)
+    throw std::runtime_error(path + ": its " + tables + " tables are version " +
+                             std::to_string(found) +
+                             ", written by a newer valvediag; this one reads up to version " +
+                             std::to_string(supported) + ": update valvediag or use another --db");
+}
+
+}  // namespace valvediag
