@@ -5,6 +5,7 @@
 
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "valvediag/diagnosis.hpp"
@@ -22,11 +23,20 @@ struct AssessOptions {
   std::size_t min_samples = 200;
   // Analyse the whole record even when OP holds still for most of it (quiet_lead_in.hpp).
   bool keep_lead_in = false;
+  // Held-out shares at which the climb is run again to see whether the verdict holds (sweep
+  // --split-check); empty: none. The verdict itself stays the one at diagnose.validation_fraction.
+  std::vector<double> check_splits;
 };
 
 struct LadderStep {
   std::string model;
   double fitness_percent = 0.0, validation_fitness_percent = 0.0;
+};
+
+// The verdict of the same record scored on another held-out share (AssessOptions::check_splits).
+struct SplitVerdict {
+  double validate = 0.0;
+  std::string verdict;
 };
 
 struct LoopAssessment {
@@ -48,7 +58,10 @@ struct LoopAssessment {
   LimitCycle limit_cycle;        // the diagnosis's limit-cycle test (not run: not oscillating)
   WholeRecordTest whole_record;  // the diagnosis's whole-record test (not run: not needed)
   ValveTravel valve_travel;      // the valve-travel test (not run: MV not recorded)
-  double severity = 0.0;         // ranking key, higher first (see assess_loop)
+  // The verdicts at the other held-out shares, when asked for and the record was judged. A
+  // verdict one of them does not repeat rests on where the record was split: read it with care.
+  std::vector<SplitVerdict> split_verdicts;
+  double severity = 0.0;  // ranking key, higher first (see assess_loop)
   double elapsed_s = 0.0;
   // Where the diagnosis started, s after the record's first sample: > 0 when a quiet lead-in
   // was left out (quiet_lead_in.hpp); the loop-health figures cover the whole record.
@@ -83,8 +96,13 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
 // Severity from verdict, stiction size and oscillation: stiction 6, deadband 5,
 // other-nonlinearity 3, no-valve-problem 1, not-enough-data 0, error -1; + 1 when the loop
 // oscillates (an unjudged loop too: in an OP-only sweep the cycling valves come first); + the
-// stiction band in % of travel / 2, at most 3.
+// stiction band in % of travel / 2, at most 3. A split check does not change it: measured, the
+// memory verdicts it fails to repeat were as often true as false (README).
 double severity(const LoopAssessment& a);
+
+// How many of the split verdicts, the assessment's own included, agree with it: {agree, of}.
+// {1, 1} without a split check.
+std::pair<int, int> split_agreement(const LoopAssessment& a);
 
 // The quiet lead-in assess_loop leaves out of d (none with opt.keep_lead_in): quiet_lead_in(),
 // unless the part after it fails unusable_reason() while the whole record passes it

@@ -66,6 +66,9 @@ struct LoopJob {
   std::string mat_loop;  // the loop's path inside a .mat file holding several
 };
 
+// How far --split-check moves the held-out share each way.
+constexpr double kSplitStep = 0.05;
+
 struct SweepArgs {
   std::string config, db, loops, window = "4h", record, shard, json, csv, html, loop_timeout = "5m";
   std::string reports;   // a folder for each loop's HTML report
@@ -73,7 +76,8 @@ struct SweepArgs {
   std::vector<std::string> files;
   DataOptions layout;  // CSV layout for data files
   int jobs = 0;
-  double validate = 0.3;  // fraction of each record held out for scoring, as diagnose
+  double validate = 0.3;     // fraction of each record held out for scoring, as diagnose
+  bool split_check = false;  // also score at validate -+ kSplitStep: does the verdict hold?
   bool quiet = false;
   bool keep_lead_in = false;
 };
@@ -95,6 +99,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   opt.diagnose.fit.threads = threads;
   opt.keep_lead_in = a.keep_lead_in;
   opt.diagnose.validation_fraction = a.validate;
+  if (a.split_check) opt.check_splits = {a.validate - kSplitStep, a.validate + kSplitStep};
   LoopData d;
   std::vector<std::string> notes;  // column choices: the per-loop report shows them, not the sweep
   try {
@@ -334,6 +339,9 @@ void add_sweep(CLI::App& app, int& exit_code) {
   cmd->add_option("--validate", a->validate,
                   "fraction of each record held out for scoring, as in diagnose")
       ->capture_default_str();
+  cmd->add_flag("--split-check", a->split_check,
+                "climb again with 0.05 less and 0.05 more held out and report whether the verdict "
+                "holds (about 3x the time per judged loop)");
   cmd->add_flag("--quiet", a->quiet, "no line per finished loop");
   cmd->add_flag("--keep-lead-in", a->keep_lead_in,
                 "diagnose the whole window even when OP holds still for most of it before the "
@@ -357,6 +365,10 @@ void add_sweep(CLI::App& app, int& exit_code) {
     if (a->jobs < 0) throw UsageError("--jobs must be 0 (one per core) or more");
     if (!(a->validate > 0.05 && a->validate < 0.9))
       throw UsageError("--validate must lie in (0.05, 0.9)");
+    if (a->split_check && !(a->validate - kSplitStep > 0.05 && a->validate + kSplitStep < 0.9))
+      throw UsageError(
+          "--split-check scores at --validate -+ 0.05, so --validate must lie in "
+          "(0.1, 0.85)");
     if (!a->reports.empty()) {
       std::error_code ec;
       fs::create_directories(a->reports, ec);

@@ -1,5 +1,6 @@
 #include "valvediag/sweep_report.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -32,6 +33,13 @@ std::string text_of(const json& j, const char* key) {
 
 std::string fmt(double v, int prec = 1) {
   return report_format::fixed(v, prec, "-");
+}
+
+// "2/3": held-out shares giving the loop's verdict; "-" without a split check.
+std::string agreement(const LoopAssessment& a) {
+  if (a.split_verdicts.empty()) return "-";
+  const auto [agree, of] = split_agreement(a);
+  return std::to_string(agree) + "/" + std::to_string(of);
 }
 
 std::string csv_field(const std::string& s) {
@@ -79,6 +87,10 @@ json assessment_json(const LoopAssessment& a) {
   j["limit_cycle"] = limit_cycle_json(a.limit_cycle);
   j["whole_record"] = whole_record_json(a.whole_record);
   j["valve_travel"] = valve_travel_json(a.valve_travel);
+  json splits = json::array();
+  for (const auto& v : a.split_verdicts)
+    splits.push_back({{"validate", v.validate}, {"verdict", v.verdict}});
+  j["split_check"] = splits;
   j["elapsed_s"] = a.elapsed_s;
   j["error"] = a.error;
   j["report"] = a.report;
@@ -125,6 +137,9 @@ LoopAssessment assessment_from_json(const json& j) {
   if (j.contains("limit_cycle")) a.limit_cycle = limit_cycle_from_json(j["limit_cycle"]);
   if (j.contains("whole_record")) a.whole_record = whole_record_from_json(j["whole_record"]);
   if (j.contains("valve_travel")) a.valve_travel = valve_travel_from_json(j["valve_travel"]);
+  if (j.contains("split_check") && j["split_check"].is_array())
+    for (const auto& v : j["split_check"])
+      a.split_verdicts.push_back({number_of(v, "validate"), text_of(v, "verdict")});
   a.elapsed_s = number_of(j, "elapsed_s");
   a.error = text_of(j, "error");
   a.report = text_of(j, "report");
@@ -167,23 +182,27 @@ std::vector<LoopAssessment> sweep_loops_from_json(const json& j) {
 std::string format_sweep_table(const std::vector<LoopAssessment>& loops) {
   std::ostringstream o;
   char line[512];
-  std::snprintf(line, sizeof line, "%-4s %-30s %-19s %8s %-24s %13s %-12s %9s %8s %8s %7s\n",
+  const bool checked = std::any_of(loops.begin(), loops.end(),
+                                   [](const auto& a) { return !a.split_verdicts.empty(); });
+  std::snprintf(line, sizeof line, "%-4s %-30s %-19s %8s %-24s %13s %-12s %9s %8s %8s %7s%s\n",
                 "rank", "loop", "verdict", "stiction", "model", "fit/val %", "missing first",
-                "period s", "rev/h", "travel/h", "limits");
+                "period s", "rev/h", "travel/h", "limits", checked ? " splits" : "");
   o << line;
   std::map<std::string, int> counts;
   int rank = 0;
   for (const auto& a : loops) {
     ++counts[a.verdict];
     const std::string fit = fmt(a.fitness_percent) + "/" + fmt(a.validation_fitness_percent);
-    std::snprintf(line, sizeof line, "%-4d %-30s %-19s %8s %-24s %13s %-12s %9s %8s %8s %7s\n",
+    std::string splits;
+    if (checked) splits.append(" ").append(agreement(a));
+    std::snprintf(line, sizeof line, "%-4d %-30s %-19s %8s %-24s %13s %-12s %9s %8s %8s %7s%s\n",
                   ++rank, a.loop.substr(0, 30).c_str(), a.verdict.c_str(),
                   (fmt(a.stiction_percent, 2)).c_str(), a.model.substr(0, 24).c_str(), fit.c_str(),
                   (a.first_missing.empty() ? "-" : a.first_missing).c_str(),
                   a.health.oscillating ? fmt(a.health.period_s, 0).c_str() : "-",
                   fmt(a.health.op_reversals_per_hour, 0).c_str(),
                   fmt(a.health.op_travel_percent_per_hour, 0).c_str(),
-                  fmt(a.health.time_at_limits_percent, 0).c_str());
+                  fmt(a.health.time_at_limits_percent, 0).c_str(), splits.c_str());
     o << line;
     if (a.verdict == "not-enough-data" || a.verdict == "error")
       o << "     " << (a.error.empty() ? a.reason : a.error) << "\n";
@@ -195,6 +214,15 @@ std::string format_sweep_table(const std::vector<LoopAssessment>& loops) {
   o << " (" << loops.size() << " loops)\n";
   o << "stiction: band in % of valve travel; period: of the oscillation, when one is found; "
        "travel/h: OP path in % of range per hour; limits: % of time at an OP limit\n";
+  if (checked) {
+    int fragile = 0;
+    for (const auto& a : loops) {
+      const auto [agree, of] = split_agreement(a);
+      fragile += agree < of;
+    }
+    o << "splits: held-out shares that give the same verdict (--split-check); " << fragile
+      << " loop(s) whose verdict depends on where the record is split\n";
+  }
   return o.str();
 }
 
@@ -203,7 +231,7 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
   o << "rank,loop,verdict,severity,stiction_percent,slip_jump_percent,model,fitness_percent,"
        "validation_fitness_percent,first_missing,oscillating,period_s,op_reversals_per_hour,"
        "op_travel_percent_per_hour,time_at_limits_percent,samples,source,reason,error,"
-       "valve_travel\n";
+       "valve_travel,split_agreement\n";
   int rank = 0;
   auto n = [](double v) { return std::isfinite(v) ? fmt(v, 4) : std::string(); };
   for (const auto& a : loops)
@@ -215,7 +243,8 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
       << n(a.health.op_reversals_per_hour) << "," << n(a.health.op_travel_percent_per_hour) << ","
       << n(a.health.time_at_limits_percent) << "," << a.health.samples << "," << csv_field(a.source)
       << "," << csv_field(a.reason) << "," << csv_field(a.error) << ","
-      << (a.valve_travel.decided ? a.valve_travel.verdict : "") << "\n";
+      << (a.valve_travel.decided ? a.valve_travel.verdict : "") << ","
+      << (a.split_verdicts.empty() ? "" : agreement(a)) << "\n";
   return o.str();
 }
 
@@ -237,7 +266,7 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
        "<th>stiction % travel</th><th>slip jump %</th><th class=\"l\">model</th><th>fitness "
        "%</th><th>validation %</th><th class=\"l\">missing first</th><th>oscillation period "
        "s</th><th>OP reversals/h</th><th>OP travel %/h</th><th>time at limits %</th>"
-       "<th class=\"l\">note</th></tr>\n";
+       "<th>same verdict at splits</th><th class=\"l\">note</th></tr>\n";
   for (std::size_t i = 0; i < loops.size(); ++i) {
     const auto& a = loops[i];
     const std::string link = i < report_links.size() ? report_links[i] : "";
@@ -254,7 +283,8 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
       << (a.health.oscillating ? fmt(a.health.period_s, 0) : "-") << "</td><td>"
       << fmt(a.health.op_reversals_per_hour, 0) << "</td><td>"
       << fmt(a.health.op_travel_percent_per_hour, 0) << "</td><td>"
-      << fmt(a.health.time_at_limits_percent, 0) << "</td><td class=\"l\">"
+      << fmt(a.health.time_at_limits_percent, 0) << "</td><td>" << agreement(a)
+      << "</td><td class=\"l\">"
       << html_escape(a.error.empty() ? (a.verdict == "not-enough-data" ? a.reason : "") : a.error)
       << "</td></tr>\n";
   }

@@ -98,6 +98,12 @@ double severity(const LoopAssessment& a) {
   return s;
 }
 
+std::pair<int, int> split_agreement(const LoopAssessment& a) {
+  int agree = 1;
+  for (const auto& v : a.split_verdicts) agree += v.verdict == a.verdict;
+  return {agree, 1 + static_cast<int>(a.split_verdicts.size())};
+}
+
 void rank(std::vector<LoopAssessment>& loops) {
   auto size = [](const LoopAssessment& a) {
     return std::isfinite(a.stiction_percent) ? a.stiction_percent : -1.0;
@@ -182,6 +188,19 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
     std::string s = describe_lead_in(lead, d.t, d.t.front());
     s[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(s[0])));
     a.reason = s + ". " + a.reason;
+  }
+  for (const double v : opt.check_splits) {
+    DiagnoseOptions other = dopt;
+    other.validation_fraction = v;
+    other.fit.validation_fraction = 0.0;  // the share above counts, not one fixed in fit options
+    other.fit.validation_start = 0;
+    SplitVerdict sv{v, ""};
+    try {
+      sv.verdict = verdict(diagnose_auto(x.op, x.pv, x.mv, x.sample_period(), ModelSpec{}, other));
+    } catch (const std::invalid_argument&) {
+      sv.verdict = "error";  // a share that leaves too little to fit: it does not confirm
+    }
+    a.split_verdicts.push_back(sv);
   }
   if (diagnosis) *diagnosis = std::move(dg);
   return finish();

@@ -13,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -54,7 +55,8 @@ struct CliResult {
   std::string out;
 };
 
-// `bin` with `args`; the output goes through a numbered file in `tmp`.
+// `bin` with `args`; the output (stdout and stderr together) goes through a numbered file in
+// `tmp`, removed once read.
 inline CliResult run_cli(const std::string& bin, const std::vector<std::string>& args,
                          const std::filesystem::path& tmp, double limit_s = 60.0) {
   static int n = 0;
@@ -65,9 +67,13 @@ inline CliResult run_cli(const std::string& bin, const std::vector<std::string>&
   std::vector<std::string> full{bin};
   full.insert(full.end(), args.begin(), args.end());
   const int st = wait_child(spawn(full, out), limit_s);
-  std::ifstream f(out);
   std::stringstream ss;
-  ss << f.rdbuf();
+  {
+    std::ifstream f(out);
+    ss << f.rdbuf();
+  }
+  std::error_code ec;
+  std::filesystem::remove(out, ec);  // one file per call would pile up over runs
   return {st, ss.str()};
 }
 

@@ -210,6 +210,44 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(html.find("<a href=\"reports/FIC101.html\">FIC101</a>") != std::string::npos);
 }
 
+TEST_CASE(
+    "split check: a clear sticky valve holds at every split; the summary marks one that does not") {
+  const LoopData sticky = run_scenario(scenario_by_name("paper-ex1"), 1, 3000);
+  AssessOptions opt;
+  opt.check_splits = {0.25, 0.35};
+  const LoopAssessment s = assess_loop(sticky, "FIC101", opt);
+  INFO(s.reason);
+  CHECK(s.verdict == "stiction");
+  REQUIRE(s.split_verdicts.size() == 2);
+  CHECK(s.split_verdicts[0].validate == 0.25);
+  CHECK(s.split_verdicts[0].verdict == "stiction");
+  CHECK(s.split_verdicts[1].verdict == "stiction");
+  CHECK(split_agreement(s) == std::pair{3, 3});
+  LoopAssessment unchecked = s;
+  unchecked.split_verdicts.clear();
+  CHECK(split_agreement(unchecked) == std::pair{1, 1});
+  CHECK(severity(unchecked) == s.severity);  // agreement costs nothing
+
+  LoopAssessment fragile = s;
+  fragile.loop = "FIC102";
+  fragile.split_verdicts[1].verdict = "no-valve-problem";
+  CHECK(split_agreement(fragile) == std::pair{2, 3});
+  CHECK(severity(fragile) == s.severity);
+  const std::vector<LoopAssessment> v{s, fragile};
+  const std::string table = format_sweep_table(v);
+  CHECK(table.find(" splits\n") != std::string::npos);
+  CHECK(table.find(" 2/3\n") != std::string::npos);
+  CHECK(table.find("1 loop(s) whose verdict depends on where the record is split") !=
+        std::string::npos);
+  CHECK(sweep_csv(v).find(",2/3\n") != std::string::npos);
+  const LoopAssessment back =
+      assessment_from_json(nlohmann::json::parse(assessment_json(fragile).dump()));
+  REQUIRE(back.split_verdicts.size() == 2);
+  CHECK(back.split_verdicts[1].validate == 0.35);
+  CHECK(back.split_verdicts[1].verdict == "no-valve-problem");
+  CHECK(format_sweep_table({unchecked}).find("splits") == std::string::npos);
+}
+
 TEST_CASE("the results store keeps each sweep and gives a loop's trend, oldest first") {
   const TempDb tmp(fs::temp_directory_path() /
                    ("valvediag-store-" + std::to_string(::getpid()) + ".sqlite"));

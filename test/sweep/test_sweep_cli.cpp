@@ -477,5 +477,8 @@ TEST_CASE("sweep: a loop over its time limit is stopped and reported; user error
   CHECK(run({"sweep", longf, "--op-range", "100:0"}).status == 2);
   CHECK(run({"sweep", longf, "--window", "soon"}).status == 2);
   CHECK(run({"sweep", longf, "--validate", "0.95"}).status == 2);
+  const test::CliResult split = run({"sweep", longf, "--split-check", "--validate", "0.08"});
+  CHECK(split.status == 2);
+  CHECK(split.out.find("--validate must lie in (0.1, 0.85)") != std::string::npos);
   CHECK(run({"trend", "--db", (kTmp / "none.sqlite").string()}).status == 2);
 }
