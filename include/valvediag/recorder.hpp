@@ -91,7 +91,7 @@ struct RecorderOptions {
   std::string db_path;
   std::vector<std::string> loops;    // names to record; empty: every loop of the site
   std::optional<double> duration_s;  // stop after this long; nullopt: until stop is set
-  double commit_interval_s = 0.5;    // at most this much is lost on a kill -9
+  double commit_interval_s = 0.5;    // at most this much is lost on a kill -9 or a power cut
   // Due time of tick 0 (a moment after run() is called); default: when run() starts. Lets a
   // caller put the polls between the steps of a simulated PLC.
   std::optional<std::chrono::steady_clock::time_point> start;
