@@ -339,9 +339,10 @@ void add_sweep(CLI::App& app, int& exit_code) {
   cmd->add_option("--validate", a->validate,
                   "fraction of each record held out for scoring, as in diagnose")
       ->capture_default_str();
-  cmd->add_flag("--split-check", a->split_check,
-                "climb again with 0.05 less and 0.05 more held out and report whether the verdict "
-                "holds (about 3x the time per judged loop)");
+  cmd->add_flag(
+      "--split-check", a->split_check,
+      "climb again with 0.05 less and 0.05 more held out and report whether the verdict "
+      "holds (about 3x the time per judged loop; --loop-timeout covers all three climbs)");
   cmd->add_flag("--quiet", a->quiet, "no line per finished loop");
   cmd->add_flag("--keep-lead-in", a->keep_lead_in,
                 "diagnose the whole window even when OP holds still for most of it before the "
