@@ -100,6 +100,13 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
 // memory verdicts it fails to repeat were as often true as false (README).
 double severity(const LoopAssessment& a);
 
+// The verdicts of the record diagnosed again with each held-out share of `splits` (its lead-in
+// already left out), the rest of `opt` as given: climbed from `start` with `climb`, else one
+// diagnosis of `start`. A share that leaves too little to fit gives "error".
+std::vector<SplitVerdict> split_verdicts(const LoopData& d, const DiagnoseOptions& opt,
+                                         const std::vector<double>& splits, bool climb = true,
+                                         const ModelSpec& start = {});
+
 // How many of the split verdicts, the assessment's own included, agree with it: {agree, of}.
 // {1, 1} without a split check.
 std::pair<int, int> split_agreement(const LoopAssessment& a);

@@ -8,6 +8,7 @@
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/verdict.hpp"
 
 namespace valvediag::cli {
 
@@ -29,7 +30,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     DataOptions data;
     std::string model = "linear";
     double validate = 0.3;
-    bool autoclimb = false, no_history = false, keep_lead_in = false;
+    bool autoclimb = false, no_history = false, keep_lead_in = false, split_check = false;
     double min_gain = 2.0;
     std::vector<std::string> candidates;
     std::string json, op_range;
@@ -53,11 +54,13 @@ void add_diagnose(CLI::App& app, int& exit_code) {
   cmd->add_flag("--keep-lead-in", a->keep_lead_in,
                 "diagnose the whole record even when OP holds still for most of it before the "
                 "loop moves (by default that lead-in is left out, as in a sweep)");
+  cmd->add_flag("--split-check", a->split_check,
+                "diagnose again with 0.05 less and 0.05 more held out and say whether the verdict "
+                "holds (about 3x the time)");
   cmd->add_flag("--no-history", a->no_history,
                 "do not add the fits to the model history next to the data");
   cmd->callback([a, &exit_code] {
-    if (!(a->validate > 0.05 && a->validate < 0.9))
-      throw UsageError("--validate must lie in (0.05, 0.9)");
+    const std::vector<double> shares = split_check_shares(a->validate, a->split_check);
     const ModelSpec spec = parse_model_spec(a->model);
     const OpRange range = parse_op_range(a->op_range);
     std::vector<std::string> notes;
@@ -80,6 +83,20 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     Diagnosis r = a->autoclimb ? diagnose_auto(d.op, d.pv, d.mv, Ts, spec, o)
                                : diagnose(d.op, d.pv, d.mv, Ts, spec, o);
     std::cout << format_diagnosis(r, d.t, unusable);
+    // Not for a record a sweep would not judge: its verdict is not-enough-data at any split.
+    const std::vector<SplitVerdict> splits = unusable.empty()
+                                                 ? split_verdicts(d, o, shares, a->autoclimb, spec)
+                                                 : std::vector<SplitVerdict>{};
+    if (!splits.empty()) {
+      const std::string v = verdict(r, unusable);
+      int agree = 1;
+      std::cout << "splits:   ";
+      for (const auto& s : splits) {
+        agree += s.verdict == v;
+        std::printf(" %s with %.2f held out;", s.verdict.c_str(), s.validate);
+      }
+      std::printf(" %d of %zu shares give %s\n", agree, splits.size() + 1, v.c_str());
+    }
     // The stiction size the sweep reports, for one loop without a site config (none when the
     // record cannot be judged).
     const FrictionSize fr = unusable.empty() ? friction_size(r, d.op, d.pv, range) : FrictionSize{};
@@ -97,6 +114,9 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       j["stiction_percent"] = number(fr.band_percent);
       j["slip_jump_percent"] = number(fr.jump_percent);
       j["analysed_from_s"] = part.from_s;
+      nlohmann::json sj = nlohmann::json::array();
+      for (const auto& s : splits) sj.push_back({{"validate", s.validate}, {"verdict", s.verdict}});
+      j["split_check"] = sj;
       write_text(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }

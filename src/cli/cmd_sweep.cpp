@@ -66,9 +66,6 @@ struct LoopJob {
   std::string mat_loop;  // the loop's path inside a .mat file holding several
 };
 
-// How far --split-check moves the held-out share each way.
-constexpr double kSplitStep = 0.05;
-
 struct SweepArgs {
   std::string config, db, loops, window = "4h", record, shard, json, csv, html, loop_timeout = "5m";
   std::string reports;   // a folder for each loop's HTML report
@@ -99,7 +96,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
   opt.diagnose.fit.threads = threads;
   opt.keep_lead_in = a.keep_lead_in;
   opt.diagnose.validation_fraction = a.validate;
-  if (a.split_check) opt.check_splits = {a.validate - kSplitStep, a.validate + kSplitStep};
+  opt.check_splits = split_check_shares(a.validate, a.split_check);
   LoopData d;
   std::vector<std::string> notes;  // column choices: the per-loop report shows them, not the sweep
   try {
@@ -364,12 +361,7 @@ void add_sweep(CLI::App& app, int& exit_code) {
     const double window_s = duration_option("--window", a->window);
     const double timeout_s = duration_option("--loop-timeout", a->loop_timeout);
     if (a->jobs < 0) throw UsageError("--jobs must be 0 (one per core) or more");
-    if (!(a->validate > 0.05 && a->validate < 0.9))
-      throw UsageError("--validate must lie in (0.05, 0.9)");
-    if (a->split_check && !(a->validate - kSplitStep > 0.05 && a->validate + kSplitStep < 0.9))
-      throw UsageError(
-          "--split-check scores at --validate -+ 0.05, so --validate must lie in "
-          "(0.1, 0.85)");
+    (void)split_check_shares(a->validate, a->split_check);  // user errors before any work
     if (!a->reports.empty()) {
       std::error_code ec;
       fs::create_directories(a->reports, ec);

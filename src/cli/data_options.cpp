@@ -76,6 +76,16 @@ void add_op_range_option(CLI::App* cmd, std::string& spec) {
       ->group("Input");
 }
 
+std::vector<double> split_check_shares(double validate, bool split_check) {
+  if (!(validate > 0.05 && validate < 0.9)) throw UsageError("--validate must lie in (0.05, 0.9)");
+  if (!split_check) return {};
+  constexpr double kStep = 0.05;  // how far the check moves the split each way
+  if (!(validate - kStep > 0.05 && validate + kStep < 0.9))
+    throw UsageError(
+        "--split-check scores at --validate -+ 0.05, so --validate must lie in (0.1, 0.85)");
+  return {validate - kStep, validate + kStep};
+}
+
 OpRange parse_op_range(const std::string& spec) {
   if (spec.empty()) return {};
   const auto colon = spec.find(':');

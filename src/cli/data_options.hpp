@@ -56,6 +56,10 @@ struct AnalysedPart {
 };
 AnalysedPart analysed_part(const LoopData& whole, bool keep_lead_in, const OpRange& range,
                            std::vector<std::string>& notes);
+// --validate F with --split-check (diagnose and sweep): checks F and gives the other held-out
+// shares the split check scores at, F -+ 0.05 (none without the check). A UsageError names the
+// options and the range.
+std::vector<double> split_check_shares(double validate, bool split_check);
 // What the data is called in messages and which name its model history hangs off:
 // the file, "site.sqlite.FIC101" for a recorded loop, "runs.mat.runs(2)" for a loop of a .mat
 // file named with --loop.

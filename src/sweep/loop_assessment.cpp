@@ -98,6 +98,28 @@ double severity(const LoopAssessment& a) {
   return s;
 }
 
+std::vector<SplitVerdict> split_verdicts(const LoopData& d, const DiagnoseOptions& opt,
+                                         const std::vector<double>& splits, bool climb,
+                                         const ModelSpec& start) {
+  std::vector<SplitVerdict> out;
+  for (const double v : splits) {
+    DiagnoseOptions other = opt;
+    other.validation_fraction = v;
+    other.fit.validation_fraction = 0.0;  // the share above counts, not one fixed in fit options
+    other.fit.validation_start = 0;
+    SplitVerdict sv{v, ""};
+    try {
+      const double Ts = d.sample_period();
+      sv.verdict = verdict(climb ? diagnose_auto(d.op, d.pv, d.mv, Ts, start, other)
+                                 : diagnose(d.op, d.pv, d.mv, Ts, start, other));
+    } catch (const std::invalid_argument&) {
+      sv.verdict = "error";  // a share that leaves too little to fit: it does not confirm
+    }
+    out.push_back(sv);
+  }
+  return out;
+}
+
 std::pair<int, int> split_agreement(const LoopAssessment& a) {
   int agree = 1;
   for (const auto& v : a.split_verdicts) agree += v.verdict == a.verdict;
@@ -189,19 +211,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
     s[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(s[0])));
     a.reason = s + ". " + a.reason;
   }
-  for (const double v : opt.check_splits) {
-    DiagnoseOptions other = dopt;
-    other.validation_fraction = v;
-    other.fit.validation_fraction = 0.0;  // the share above counts, not one fixed in fit options
-    other.fit.validation_start = 0;
-    SplitVerdict sv{v, ""};
-    try {
-      sv.verdict = verdict(diagnose_auto(x.op, x.pv, x.mv, x.sample_period(), ModelSpec{}, other));
-    } catch (const std::invalid_argument&) {
-      sv.verdict = "error";  // a share that leaves too little to fit: it does not confirm
-    }
-    a.split_verdicts.push_back(sv);
-  }
+  a.split_verdicts = split_verdicts(x, dopt, opt.check_splits);
   if (diagnosis) *diagnosis = std::move(dg);
   return finish();
 }

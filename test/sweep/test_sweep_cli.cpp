@@ -357,15 +357,22 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
   const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
                         "stic_2411FIC20102_20241226_0953_Stick1=0.681163.txt";
   const std::string dj = (kTmp / "rest.json").string();
-  const test::CliResult diag = run(
-      test::with_plant_layout({"diagnose", file.string(), "--auto", "--no-history", "--json", dj}),
-      600.0);
+  const test::CliResult diag =
+      run(test::with_plant_layout(
+              {"diagnose", file.string(), "--auto", "--no-history", "--split-check", "--json", dj}),
+          600.0);
   INFO(diag.out);
   REQUIRE(diag.status == 0);
   CHECK(diag.out.find("note: the analysis starts at t = 5290 s (sample 530 of 751): before t = "
                       "5730 s OP holds within a quarter of its span") != std::string::npos);
   CHECK(diag.out.find("verdict:   stiction") != std::string::npos);
+  // The slip explains the part after the rest whichever share of it is held out.
+  CHECK(diag.out.find("splits:    stiction with 0.25 held out; stiction with 0.35 held out; 3 of "
+                      "3 shares give stiction") != std::string::npos);
   const nlohmann::json d = read_json(dj);
+  REQUIRE(d["split_check"].size() == 2);
+  CHECK(d["split_check"][1]["validate"].get<double>() == doctest::Approx(0.35));
+  CHECK(d["split_check"][1]["verdict"] == "stiction");
   CHECK(d["analysed_from_s"].get<double>() == 5290.0);
   CHECK(d["unusable_reason"] == "");  // a sweep judges it too
   CHECK(d["stiction_percent"].get<double>() > 1.0);
@@ -480,5 +487,6 @@ TEST_CASE("sweep: a loop over its time limit is stopped and reported; user error
   const test::CliResult split = run({"sweep", longf, "--split-check", "--validate", "0.08"});
   CHECK(split.status == 2);
   CHECK(split.out.find("--validate must lie in (0.1, 0.85)") != std::string::npos);
+  CHECK(run({"diagnose", longf, "--split-check", "--validate", "0.88"}).status == 2);
   CHECK(run({"trend", "--db", (kTmp / "none.sqlite").string()}).status == 2);
 }
