@@ -28,6 +28,10 @@ nlohmann::json sweep_json(const SweepInfo& info, const std::vector<LoopAssessmen
 // Reads a results file's JSON (sweep_json); throws std::runtime_error naming what is wrong.
 std::vector<LoopAssessment> sweep_loops_from_json(const nlohmann::json& j);
 
+// "2/3": the held-out shares that give the loop's verdict (split_agreement); "-" without a
+// split check.
+std::string split_agreement_text(const LoopAssessment& a);
+
 // The ranked plant summary (loops in the given order) and a count per verdict.
 std::string format_sweep_table(const std::vector<LoopAssessment>& loops);
 std::string sweep_csv(const std::vector<LoopAssessment>& loops);

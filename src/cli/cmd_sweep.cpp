@@ -569,9 +569,10 @@ void add_trend(CLI::App& app, int& exit_code) {
       std::cout << name << ":\n";
       char line[256];
       // "held": the share held out for scoring; validation fitness compares at equal shares.
-      std::snprintf(line, sizeof line, "  %-6s %-20s %-19s %8s %8s %5s %9s %8s %8s\n", "sweep",
-                    "started", "verdict", "stiction", "val fit", "held", "period s", "rev/h",
-                    "travel/h");
+      // "splits": shares giving the verdict when the sweep ran with --split-check.
+      std::snprintf(line, sizeof line, "  %-6s %-20s %-19s %8s %8s %5s %6s %9s %8s %8s\n", "sweep",
+                    "started", "verdict", "stiction", "val fit", "held", "splits", "period s",
+                    "rev/h", "travel/h");
       std::cout << line;
       for (const auto& p : points) {
         const auto& r = p.result;
@@ -581,10 +582,10 @@ void add_trend(CLI::App& app, int& exit_code) {
           std::snprintf(b, sizeof b, "%.*f", prec, v);
           return std::string(b);
         };
-        std::snprintf(line, sizeof line, "  %-6lld %-20s %-19s %8s %8s %5s %9s %8s %8s\n",
+        std::snprintf(line, sizeof line, "  %-6lld %-20s %-19s %8s %8s %5s %6s %9s %8s %8s\n",
                       static_cast<long long>(p.sweep), p.started_utc.c_str(), r.verdict.c_str(),
                       f(r.stiction_percent, 2).c_str(), f(r.validation_fitness_percent, 1).c_str(),
-                      f(p.validation_fraction, 2).c_str(),
+                      f(p.validation_fraction, 2).c_str(), split_agreement_text(r).c_str(),
                       r.health.oscillating ? f(r.health.period_s, 0).c_str() : "-",
                       f(r.health.op_reversals_per_hour, 0).c_str(),
                       f(r.health.op_travel_percent_per_hour, 0).c_str());

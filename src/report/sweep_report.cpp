@@ -35,13 +35,6 @@ std::string fmt(double v, int prec = 1) {
   return report_format::fixed(v, prec, "-");
 }
 
-// "2/3": held-out shares giving the loop's verdict; "-" without a split check.
-std::string agreement(const LoopAssessment& a) {
-  if (a.split_verdicts.empty()) return "-";
-  const auto [agree, of] = split_agreement(a);
-  return std::to_string(agree) + "/" + std::to_string(of);
-}
-
 std::string csv_field(const std::string& s) {
   if (s.find_first_of(",\"\n") == std::string::npos) return s;
   std::string o = "\"";
@@ -50,6 +43,12 @@ std::string csv_field(const std::string& s) {
 }
 
 }  // namespace
+
+std::string split_agreement_text(const LoopAssessment& a) {
+  if (a.split_verdicts.empty()) return "-";
+  const auto [agree, of] = split_agreement(a);
+  return std::to_string(agree) + "/" + std::to_string(of);
+}
 
 json assessment_json(const LoopAssessment& a) {
   json j;
@@ -194,7 +193,7 @@ std::string format_sweep_table(const std::vector<LoopAssessment>& loops) {
     ++counts[a.verdict];
     const std::string fit = fmt(a.fitness_percent) + "/" + fmt(a.validation_fitness_percent);
     std::string splits;
-    if (checked) splits.append(" ").append(agreement(a));
+    if (checked) splits.append(" ").append(split_agreement_text(a));
     std::snprintf(line, sizeof line, "%-4d %-30s %-19s %8s %-24s %13s %-12s %9s %8s %8s %7s%s\n",
                   ++rank, a.loop.substr(0, 30).c_str(), a.verdict.c_str(),
                   (fmt(a.stiction_percent, 2)).c_str(), a.model.substr(0, 24).c_str(), fit.c_str(),
@@ -244,7 +243,7 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
       << n(a.health.time_at_limits_percent) << "," << a.health.samples << "," << csv_field(a.source)
       << "," << csv_field(a.reason) << "," << csv_field(a.error) << ","
       << (a.valve_travel.decided ? a.valve_travel.verdict : "") << ","
-      << (a.split_verdicts.empty() ? "" : agreement(a)) << "\n";
+      << (a.split_verdicts.empty() ? "" : split_agreement_text(a)) << "\n";
   return o.str();
 }
 
@@ -283,7 +282,7 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
       << (a.health.oscillating ? fmt(a.health.period_s, 0) : "-") << "</td><td>"
       << fmt(a.health.op_reversals_per_hour, 0) << "</td><td>"
       << fmt(a.health.op_travel_percent_per_hour, 0) << "</td><td>"
-      << fmt(a.health.time_at_limits_percent, 0) << "</td><td>" << agreement(a)
+      << fmt(a.health.time_at_limits_percent, 0) << "</td><td>" << split_agreement_text(a)
       << "</td><td class=\"l\">"
       << html_escape(a.error.empty() ? (a.verdict == "not-enough-data" ? a.reason : "") : a.error)
       << "</td></tr>\n";

@@ -123,13 +123,16 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
   CHECK(header.find(",valve_travel") != std::string::npos);
   CHECK(fs::file_size(html) > 500);
 
-  // A second sweep over the same recording (no --record): the trend shows both.
-  r = run(
-      {"sweep", "--config", site, "--db", db, "--loops", "FIC101", "--window", "1h", "--quiet"});
+  // A second sweep over the same recording (no --record), with the split check: the trend shows
+  // both, the second with its agreement.
+  r = run({"sweep", "--config", site, "--db", db, "--loops", "FIC101", "--window", "1h", "--quiet",
+           "--split-check"});
   CHECK(r.status == 0);
   r = run({"trend", "--db", db, "--loop", "FIC101"});
   CHECK(r.status == 0);
   CHECK(r.out.find("FIC101:") == 0);
+  CHECK(r.out.find(" splits ") != std::string::npos);
+  CHECK(r.out.find("/3 ") != std::string::npos);
   // Two sweeps listed, each with FIC101's verdict.
   std::size_t rows = 0;
   for (std::size_t p = r.out.find(" " + v + " "); p != std::string::npos;
