@@ -29,7 +29,11 @@ struct TrendPoint {
 // Throws std::runtime_error naming the file and what to do on any SQLite failure.
 class SweepStore {
  public:
-  explicit SweepStore(const std::string& db_path);
+  enum class Access { ReadWrite, ReadOnly };
+  // ReadWrite creates the file or migrates its tables; ReadOnly (trend) writes nothing, so a
+  // read-only copy of a site database can be read: it refuses tables it would have to migrate,
+  // and a file without sweep tables gives empty trends.
+  explicit SweepStore(const std::string& db_path, Access access = Access::ReadWrite);
   ~SweepStore();
   SweepStore(const SweepStore&) = delete;
   SweepStore& operator=(const SweepStore&) = delete;

@@ -559,12 +559,14 @@ void add_trend(CLI::App& app, int& exit_code) {
   cmd->add_option("--last", a->last, "how many past sweeps")->capture_default_str();
   cmd->callback([a, &exit_code] {
     if (!fs::exists(a->db)) throw UsageError(a->db + ": no such database");
-    SweepStore store(a->db);
-    const auto loops = a->loop.empty() ? store.assessed_loops() : std::vector<std::string>{a->loop};
+    // trend only reads: a read-only copy of the database will do.
+    const auto store = std::make_unique<SweepStore>(a->db, SweepStore::Access::ReadOnly);
+    const auto loops =
+        a->loop.empty() ? store->assessed_loops() : std::vector<std::string>{a->loop};
     if (loops.empty())
       throw UsageError(a->db + ": no sweep results yet: run valvediag sweep first");
     for (const auto& name : loops) {
-      const auto points = store.trend(name, a->last);
+      const auto points = store->trend(name, a->last);
       if (points.empty()) throw UsageError(a->db + ": no sweep assessed loop '" + name + "'");
       std::cout << name << ":\n";
       char line[256];

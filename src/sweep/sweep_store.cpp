@@ -63,6 +63,7 @@ sqlite3* open_db(const std::string& path, int flags) {
 struct SweepStore::Impl {
   sqlite3* db = nullptr;
   std::string path;
+  bool no_tables = false;  // opened read-only on a file without sweep tables
   void fail(const std::string& what) const {
     throw std::runtime_error(path + ": " + what + ": " + sqlite3_errmsg(db) +
                              " (is the disk full or the file read-only?)");
@@ -103,12 +104,26 @@ void SweepStore::Impl::migrate() const {
   }
 }
 
-SweepStore::SweepStore(const std::string& db_path) : impl_(std::make_unique<Impl>()) {
+SweepStore::SweepStore(const std::string& db_path, Access access)
+    : impl_(std::make_unique<Impl>()) {
   impl_->path = db_path;
-  impl_->db = open_db(db_path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+  const bool read_only = access == Access::ReadOnly;
+  impl_->db = open_db(
+      db_path, read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
   try {
-    impl_->exec("PRAGMA journal_mode=WAL");
-    impl_->migrate();
+    if (read_only) {
+      const int v = schema_version(impl_->db, db_path, "sweeps", "sweeps");
+      require_known_schema(db_path, "sweep", v, kSweepSchemaVersion);
+      impl_->no_tables = v == 0;  // nothing assessed yet: empty answers, not an error
+      if (v > 0 && v < kSweepSchemaVersion)
+        throw std::runtime_error(
+            db_path + ": its sweep tables are version " + std::to_string(v) +
+            ", from an older valvediag; the next sweep into it brings them to version " +
+            std::to_string(kSweepSchemaVersion) + " (or run this on a writable copy)");
+    } else {
+      impl_->exec("PRAGMA journal_mode=WAL");
+      impl_->migrate();
+    }
   } catch (...) {
     sqlite3_close(impl_->db);
     throw;
@@ -183,6 +198,7 @@ void SweepStore::end_sweep(std::int64_t sweep, const SweepInfo& info, const std:
 }
 
 std::vector<TrendPoint> SweepStore::trend(const std::string& loop, int last) {
+  if (impl_->no_tables) return {};
   sqlite3_stmt* s = impl_->prepare(
       "SELECT r.sweep_id, w.started_utc, r.result_json, w.validate FROM sweep_results r "
       "JOIN sweeps w ON w.id = r.sweep_id WHERE r.loop = ? ORDER BY r.sweep_id DESC LIMIT ?");
@@ -209,6 +225,7 @@ std::vector<TrendPoint> SweepStore::trend(const std::string& loop, int last) {
 }
 
 std::vector<std::string> SweepStore::assessed_loops() {
+  if (impl_->no_tables) return {};
   sqlite3_stmt* s = impl_->prepare("SELECT DISTINCT loop FROM sweep_results ORDER BY loop");
   std::vector<std::string> out;
   while (sqlite3_step(s) == SQLITE_ROW)

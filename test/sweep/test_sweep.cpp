@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
 #include <string>
 #include <system_error>
@@ -315,6 +316,20 @@ TEST_CASE("the results store migrates a database of the first release and refuse
            "INSERT INTO sweep_results(sweep_id, loop, verdict, result_json) VALUES(1, "
            "'FIC101', 'stiction', '" +
                assessment_json(old).dump() + "')");
+  auto bytes = [&] {
+    std::ifstream f(db, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  const std::string before = bytes();
+  try {  // trend's read-only store does not migrate: it says how the tables get there
+    SweepStore reader(db.string(), SweepStore::Access::ReadOnly);
+    FAIL("first-release tables were read without their migration");
+  } catch (const std::runtime_error& e) {
+    CHECK(std::string(e.what()).find("its sweep tables are version 1, from an older valvediag; the "
+                                     "next sweep into it brings them to version 2") !=
+          std::string::npos);
+  }
+  CHECK(bytes() == before);  // nothing written
   {
     SweepStore store(db.string());  // migrates
     SweepInfo info;
@@ -335,15 +350,30 @@ TEST_CASE("the results store migrates a database of the first release and refuse
     SweepStore again(db.string());  // already current: opening changes nothing
     CHECK(again.trend("FIC101").size() == 2);
   }
+  {
+    SweepStore reader(db.string(), SweepStore::Access::ReadOnly);
+    CHECK(reader.trend("FIC101").size() == 2);
+    CHECK(reader.assessed_loops() == std::vector<std::string>{"FIC101"});
+  }
+  {
+    const TempDb empty(fs::temp_directory_path() /
+                       ("valvediag-empty-" + std::to_string(::getpid()) + ".sqlite"));
+    exec_sql(empty.path, "CREATE TABLE runs(id INTEGER PRIMARY KEY)");  // a recording only
+    SweepStore reader(empty.path.string(), SweepStore::Access::ReadOnly);
+    CHECK(reader.assessed_loops().empty());
+    CHECK(reader.trend("FIC101").empty());
+  }
   exec_sql(db, "UPDATE schema_versions SET version = 99 WHERE component = 'sweeps'");
-  try {
-    SweepStore newer(db.string());
-    FAIL("a database from a newer release was opened");
-  } catch (const std::runtime_error& e) {
-    const std::string m = e.what();
-    CHECK(m.find(db.string()) != std::string::npos);
-    CHECK(m.find("version 99, written by a newer valvediag") != std::string::npos);
-    CHECK(m.find("update valvediag") != std::string::npos);
+  for (const auto access : {SweepStore::Access::ReadWrite, SweepStore::Access::ReadOnly}) {
+    try {
+      SweepStore newer(db.string(), access);
+      FAIL("a database from a newer release was opened");
+    } catch (const std::runtime_error& e) {
+      const std::string m = e.what();
+      CHECK(m.find(db.string()) != std::string::npos);
+      CHECK(m.find("version 99, written by a newer valvediag") != std::string::npos);
+      CHECK(m.find("update valvediag") != std::string::npos);
+    }
   }
 }
 
