@@ -559,8 +559,15 @@ void add_trend(CLI::App& app, int& exit_code) {
   cmd->add_option("--last", a->last, "how many past sweeps")->capture_default_str();
   cmd->callback([a, &exit_code] {
     if (!fs::exists(a->db)) throw UsageError(a->db + ": no such database");
-    // trend only reads: a read-only copy of the database will do.
-    const auto store = std::make_unique<SweepStore>(a->db, SweepStore::Access::ReadOnly);
+    // trend only reads: a read-only copy of the database will do. A file it cannot read as one
+    // (not SQLite, tables of another release) is bad input, as in export.
+    const auto store = [&] {
+      try {
+        return std::make_unique<SweepStore>(a->db, SweepStore::Access::ReadOnly);
+      } catch (const std::runtime_error& e) {
+        throw UsageError(e.what());
+      }
+    }();
     const auto loops =
         a->loop.empty() ? store->assessed_loops() : std::vector<std::string>{a->loop};
     if (loops.empty())

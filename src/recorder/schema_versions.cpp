@@ -12,16 +12,19 @@ namespace {
 // The first integer of the first row of `sql` with `text` bound to ?1, or nullopt for no row.
 std::optional<int> first_integer(sqlite3* db, const std::string& path, const char* sql,
                                  const std::string& text) {
+  // The first read of a file: a file that is not SQLite fails here.
+  auto fail = [&] {
+    throw std::runtime_error(path + ": reading the schema versions: " + sqlite3_errmsg(db) +
+                             " (is this a valvediag site database?)");
+  };
   sqlite3_stmt* s = nullptr;
-  if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK)
-    throw std::runtime_error(path + ": reading the schema versions: " + sqlite3_errmsg(db));
+  if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK) fail();
   sqlite3_bind_text(s, 1, text.c_str(), -1, SQLITE_TRANSIENT);
   std::optional<int> v;
   const int rc = sqlite3_step(s);
   if (rc == SQLITE_ROW) v = sqlite3_column_int(s, 0);
   sqlite3_finalize(s);
-  if (rc != SQLITE_ROW && rc != SQLITE_DONE)
-    throw std::runtime_error(path + ": reading the schema versions: " + sqlite3_errmsg(db));
+  if (rc != SQLITE_ROW && rc != SQLITE_DONE) fail();
   return v;
 }
 

@@ -492,4 +492,7 @@ TEST_CASE("sweep: a loop over its time limit is stopped and reported; user error
   CHECK(split.out.find("--validate must lie in (0.1, 0.85)") != std::string::npos);
   CHECK(run({"diagnose", longf, "--split-check", "--validate", "0.88"}).status == 2);
   CHECK(run({"trend", "--db", (kTmp / "none.sqlite").string()}).status == 2);
+  const test::CliResult not_db = run({"trend", "--db", longf});  // a CSV file, not a database
+  CHECK(not_db.status == 2);
+  CHECK(not_db.out.find("(is this a valvediag site database?)") != std::string::npos);
 }
