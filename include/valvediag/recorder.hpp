@@ -16,6 +16,7 @@
 
 #include "valvediag/bus.hpp"
 #include "valvediag/loop_data.hpp"
+#include "valvediag/schema_versions.hpp"
 #include "valvediag/site_config.hpp"
 
 namespace valvediag {
@@ -23,6 +24,8 @@ namespace valvediag {
 // Version of the recording tables this build writes and reads (schema_versions.hpp); a
 // database with newer ones is refused rather than misread.
 inline constexpr int kRecorderSchemaVersion = 1;
+inline constexpr SchemaTables kRecordingTables{"recorder", "samples", "recording",
+                                               kRecorderSchemaVersion};
 
 // One stored sample tick of one loop.
 struct SampleRow {

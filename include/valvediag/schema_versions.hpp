@@ -10,21 +10,24 @@ struct sqlite3;
 
 namespace valvediag {
 
-// The version of `component`'s tables in `db`: its row in schema_versions; without one, 1 when
-// `first_table` (a table of the component's first release) exists, as in files written before
-// versioning, and 0 when the file holds none of its tables. Reads only. Throws
-// std::runtime_error naming `path` when SQLite fails.
-int schema_version(sqlite3* db, const std::string& path, const std::string& component,
-                   const std::string& first_table);
+// One component's tables: its row's name, a table of its first release (files written before
+// versioning have it but no row), what messages call the tables, and the version this build
+// writes and reads.
+struct SchemaTables {
+  const char* component;
+  const char* first_table;
+  const char* name;
+  int version;
+};
 
-// Records that `component`'s tables are at `version`, creating schema_versions when needed.
-// Call inside the transaction that brought the tables there.
-void set_schema_version(sqlite3* db, const std::string& path, const std::string& component,
-                        int version);
+// The version of `t`'s tables in `db`: its row in schema_versions; without one, 1 when
+// t.first_table exists and 0 when the file holds none of its tables. Reads only. Throws
+// std::runtime_error naming `path` when SQLite fails or when the tables are newer than
+// t.version (a newer valvediag's tables may mean something this one does not know).
+int known_schema_version(sqlite3* db, const std::string& path, const SchemaTables& t);
 
-// Throws std::runtime_error naming `path` when `found` is newer than `supported`: tables a newer
-// valvediag wrote may mean something this one does not know. `tables` names them ("sweep").
-void require_known_schema(const std::string& path, const std::string& tables, int found,
-                          int supported);
+// Records that `t`'s tables are at t.version, creating schema_versions when needed. Call inside
+// the transaction that brought the tables there.
+void set_schema_version(sqlite3* db, const std::string& path, const SchemaTables& t);
 
 }  // namespace valvediag

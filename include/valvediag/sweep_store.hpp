@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/schema_versions.hpp"
 #include "valvediag/sweep_report.hpp"
 
 namespace valvediag {
@@ -18,6 +19,7 @@ namespace valvediag {
 // Version of the sweep tables this build writes; older databases are migrated when opened,
 // newer ones refused.
 inline constexpr int kSweepSchemaVersion = 2;
+inline constexpr SchemaTables kSweepTables{"sweeps", "sweeps", "sweep", kSweepSchemaVersion};
 
 struct TrendPoint {
   std::int64_t sweep = 0;

@@ -51,9 +51,7 @@ CREATE TABLE IF NOT EXISTS gaps(
 
 // Readers need recording tables this build understands.
 void require_recording(sqlite3* db, const std::string& path) {
-  const int v = schema_version(db, path, "recorder", "samples");
-  require_known_schema(path, "recording", v, kRecorderSchemaVersion);
-  if (v == 0)
+  if (known_schema_version(db, path, kRecordingTables) == 0)
     throw std::runtime_error(
         path + ": holds no recordings; record one with valvediag record --db " + path);
 }
@@ -125,11 +123,9 @@ void RecordingDb::open_tables(bool create) {
   // One transaction: two recorders creating the tables at once create them once.
   impl_->exec("BEGIN IMMEDIATE");
   try {
-    const int v = schema_version(impl_->db, path_, "recorder", "samples");
-    require_known_schema(path_, "recording", v, kRecorderSchemaVersion);
-    if (v < 1) impl_->exec(kSchema);
+    if (known_schema_version(impl_->db, path_, kRecordingTables) < 1) impl_->exec(kSchema);
     // Files from before versioning get their row too.
-    set_schema_version(impl_->db, path_, "recorder", kRecorderSchemaVersion);
+    set_schema_version(impl_->db, path_, kRecordingTables);
     impl_->exec("COMMIT");
   } catch (...) {
     sqlite3_exec(impl_->db, "ROLLBACK", nullptr, nullptr, nullptr);

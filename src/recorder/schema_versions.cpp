@@ -36,17 +36,20 @@ bool has_table(sqlite3* db, const std::string& path, const std::string& table) {
 
 }  // namespace
 
-int schema_version(sqlite3* db, const std::string& path, const std::string& component,
-                   const std::string& first_table) {
+int known_schema_version(sqlite3* db, const std::string& path, const SchemaTables& t) {
+  std::optional<int> row;
   if (has_table(db, path, "schema_versions"))
-    if (auto v = first_integer(db, path, "SELECT version FROM schema_versions WHERE component = ?1",
-                               component))
-      return *v;
-  return has_table(db, path, first_table) ? 1 : 0;
+    row = first_integer(db, path, "SELECT version FROM schema_versions WHERE component = ?1",
+                        t.component);
+  const int v = row ? *row : has_table(db, path, t.first_table) ? 1 : 0;
+  if (v > t.version)
+    throw std::runtime_error(path + ": its " + t.name + " tables are version " + std::to_string(v) +
+                             ", written by a newer valvediag; this one reads up to version " +
+                             std::to_string(t.version) + ": update valvediag or use another --db");
+  return v;
 }
 
-void set_schema_version(sqlite3* db, const std::string& path, const std::string& component,
-                        int version) {
+void set_schema_version(sqlite3* db, const std::string& path, const SchemaTables& t) {
   auto fail = [&] {
     throw std::runtime_error(path + ": recording the schema version: " + sqlite3_errmsg(db) +
                              " (check the disk has space and the file is writable)");
@@ -61,20 +64,11 @@ void set_schema_version(sqlite3* db, const std::string& path, const std::string&
           db, "INSERT OR REPLACE INTO schema_versions(component, version) VALUES(?1, ?2)", -1, &s,
           nullptr) != SQLITE_OK)
     fail();
-  sqlite3_bind_text(s, 1, component.c_str(), -1, SQLITE_TRANSIENT);
-  sqlite3_bind_int(s, 2, version);
+  sqlite3_bind_text(s, 1, t.component, -1, SQLITE_TRANSIENT);
+  sqlite3_bind_int(s, 2, t.version);
   const int rc = sqlite3_step(s);
   sqlite3_finalize(s);
   if (rc != SQLITE_DONE) fail();
-}
-
-void require_known_schema(const std::string& path, const std::string& tables, int found,
-                          int supported) {
-  if (found > supported)
-    throw std::runtime_error(path + ": its " + tables + " tables are version " +
-                             std::to_string(found) +
-                             ", written by a newer valvediag; this one reads up to version " +
-                             std::to_string(supported) + ": update valvediag or use another --db");
 }
 
 }  // namespace valvediag

@@ -89,14 +89,13 @@ struct SweepStore::Impl {
 void SweepStore::Impl::migrate() const {
   exec("BEGIN IMMEDIATE");
   try {
-    const int v = schema_version(db, path, "sweeps", "sweeps");
-    require_known_schema(path, "sweep", v, kSweepSchemaVersion);
+    const int v = known_schema_version(db, path, kSweepTables);
     if (v < 1) exec(kSchemaV1);
     // Version 2: the share of each record held out for scoring (sweep --validate). Sweeps
     // before the option all held out 0.3.
     if (v < 2)
       exec("ALTER TABLE sweeps ADD COLUMN validate REAL; UPDATE sweeps SET validate = 0.3");
-    if (v < kSweepSchemaVersion) set_schema_version(db, path, "sweeps", kSweepSchemaVersion);
+    if (v < kSweepSchemaVersion) set_schema_version(db, path, kSweepTables);
     exec("COMMIT");
   } catch (...) {
     sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
@@ -112,8 +111,7 @@ SweepStore::SweepStore(const std::string& db_path, Access access)
       db_path, read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
   try {
     if (read_only) {
-      const int v = schema_version(impl_->db, db_path, "sweeps", "sweeps");
-      require_known_schema(db_path, "sweep", v, kSweepSchemaVersion);
+      const int v = known_schema_version(impl_->db, db_path, kSweepTables);
       impl_->no_tables = v == 0;  // nothing assessed yet: empty answers, not an error
       if (v > 0 && v < kSweepSchemaVersion)
         throw std::runtime_error(
@@ -237,10 +235,8 @@ std::vector<std::string> SweepStore::assessed_loops() {
 std::optional<double> recorded_end_s(const std::string& db_path, const std::string& loop) {
   const std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_db(db_path, SQLITE_OPEN_READONLY),
                                                        sqlite3_close);
-  const int version = schema_version(db.get(), db_path, "recorder", "samples");
-  require_known_schema(db_path, "recording", version, kRecorderSchemaVersion);
   // A database without recordings (only sweep results) has recorded nothing.
-  if (version == 0) return std::nullopt;
+  if (known_schema_version(db.get(), db_path, kRecordingTables) == 0) return std::nullopt;
   sqlite3_stmt* s = nullptr;
   const char* sql =
       "SELECT l.sample_period, (SELECT MAX(tick) FROM samples WHERE loop_id = l.id) FROM loops l "
