@@ -107,8 +107,11 @@ std::vector<SplitVerdict> split_verdicts(const LoopData& d, const DiagnoseOption
                                          const std::vector<double>& splits, bool climb = true,
                                          const ModelSpec& start = {});
 
-// How many of the split verdicts, the assessment's own included, agree with it: {agree, of}.
-// {1, 1} without a split check.
+// How many of the shares give `verdict`, its own share included: {agree, of}. {1, 1} without a
+// split check.
+std::pair<int, int> split_agreement(const std::string& verdict,
+                                    const std::vector<SplitVerdict>& splits);
+// The same for an assessment's verdict.
 std::pair<int, int> split_agreement(const LoopAssessment& a);
 
 // The quiet lead-in assess_loop leaves out of d (none with opt.keep_lead_in): quiet_lead_in(),

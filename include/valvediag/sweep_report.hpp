@@ -20,6 +20,9 @@ struct SweepInfo {
   double elapsed_s = 0;
 };
 
+// The split check's extra verdicts as JSON: [{"validate": share, "verdict": ...}, ...].
+nlohmann::json split_check_json(const std::vector<SplitVerdict>& splits);
+
 nlohmann::json assessment_json(const LoopAssessment& a);
 // Throws std::runtime_error naming the missing or mistyped key.
 LoopAssessment assessment_from_json(const nlohmann::json& j);

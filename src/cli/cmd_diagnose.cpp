@@ -8,6 +8,7 @@
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/sweep_report.hpp"
 #include "valvediag/verdict.hpp"
 
 namespace valvediag::cli {
@@ -89,13 +90,11 @@ void add_diagnose(CLI::App& app, int& exit_code) {
                                                  : std::vector<SplitVerdict>{};
     if (!splits.empty()) {
       const std::string v = verdict(r, unusable);
-      int agree = 1;
       std::cout << "splits:   ";
-      for (const auto& s : splits) {
-        agree += s.verdict == v;
+      for (const auto& s : splits)
         std::printf(" %s with %.2f held out;", s.verdict.c_str(), s.validate);
-      }
-      std::printf(" %d of %zu shares give %s\n", agree, splits.size() + 1, v.c_str());
+      const auto [agree, of] = split_agreement(v, splits);
+      std::printf(" %d of %d shares give %s\n", agree, of, v.c_str());
     }
     // The stiction size the sweep reports, for one loop without a site config (none when the
     // record cannot be judged).
@@ -114,9 +113,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       j["stiction_percent"] = number(fr.band_percent);
       j["slip_jump_percent"] = number(fr.jump_percent);
       j["analysed_from_s"] = part.from_s;
-      nlohmann::json sj = nlohmann::json::array();
-      for (const auto& s : splits) sj.push_back({{"validate", s.validate}, {"verdict", s.verdict}});
-      j["split_check"] = sj;
+      j["split_check"] = split_check_json(splits);
       write_text(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }

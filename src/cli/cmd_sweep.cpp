@@ -74,7 +74,7 @@ struct SweepArgs {
   DataOptions layout;  // CSV layout for data files
   int jobs = 0;
   double validate = 0.3;     // fraction of each record held out for scoring, as diagnose
-  bool split_check = false;  // also score at validate -+ kSplitStep: does the verdict hold?
+  bool split_check = false;  // also score at the shares split_check_shares() gives
   bool quiet = false;
   bool keep_lead_in = false;
 };

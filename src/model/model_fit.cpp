@@ -331,7 +331,6 @@ void widen_unsupported_limits(const Search& s, const std::vector<double>& y,
   constexpr double kChiSquare1Dof99 = 6.635;  // 99 % quantile of chi-square with 1 dof
   const double window = s.est.options().parsimony_percent;
   const std::vector<double> absent = neutral_point(s);
-
   const auto fitness = [](const LinearFit& f) {
     return f.ok ? f.fitness_percent : -std::numeric_limits<double>::infinity();
   };

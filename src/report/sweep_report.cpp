@@ -50,6 +50,12 @@ std::string split_agreement_text(const LoopAssessment& a) {
   return std::to_string(agree) + "/" + std::to_string(of);
 }
 
+json split_check_json(const std::vector<SplitVerdict>& splits) {
+  json j = json::array();
+  for (const auto& v : splits) j.push_back({{"validate", v.validate}, {"verdict", v.verdict}});
+  return j;
+}
+
 json assessment_json(const LoopAssessment& a) {
   json j;
   j["loop"] = a.loop;
@@ -86,10 +92,7 @@ json assessment_json(const LoopAssessment& a) {
   j["limit_cycle"] = limit_cycle_json(a.limit_cycle);
   j["whole_record"] = whole_record_json(a.whole_record);
   j["valve_travel"] = valve_travel_json(a.valve_travel);
-  json splits = json::array();
-  for (const auto& v : a.split_verdicts)
-    splits.push_back({{"validate", v.validate}, {"verdict", v.verdict}});
-  j["split_check"] = splits;
+  j["split_check"] = split_check_json(a.split_verdicts);
   j["elapsed_s"] = a.elapsed_s;
   j["error"] = a.error;
   j["report"] = a.report;

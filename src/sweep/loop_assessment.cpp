@@ -120,10 +120,15 @@ std::vector<SplitVerdict> split_verdicts(const LoopData& d, const DiagnoseOption
   return out;
 }
 
-std::pair<int, int> split_agreement(const LoopAssessment& a) {
+std::pair<int, int> split_agreement(const std::string& verdict,
+                                    const std::vector<SplitVerdict>& splits) {
   int agree = 1;
-  for (const auto& v : a.split_verdicts) agree += v.verdict == a.verdict;
-  return {agree, 1 + static_cast<int>(a.split_verdicts.size())};
+  for (const auto& v : splits) agree += v.verdict == verdict;
+  return {agree, 1 + static_cast<int>(splits.size())};
+}
+
+std::pair<int, int> split_agreement(const LoopAssessment& a) {
+  return split_agreement(a.verdict, a.split_verdicts);
 }
 
 void rank(std::vector<LoopAssessment>& loops) {
