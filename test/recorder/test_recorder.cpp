@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "../bus/bus_test_util.hpp"
+#include "../common/sqlite_exec.hpp"
 #include "valvediag/bus_factory.hpp"
 #include "valvediag/recorder.hpp"
 #include "valvediag/scenarios.hpp"
@@ -407,16 +408,7 @@ TEST_CASE("short gaps are bridged by interpolation when asked; long ones still s
 }
 
 namespace {
-void exec_sql(const std::string& db, const std::string& sql) {
-  sqlite3* c = nullptr;
-  REQUIRE(sqlite3_open(db.c_str(), &c) == SQLITE_OK);
-  char* err = nullptr;
-  const int rc = sqlite3_exec(c, sql.c_str(), nullptr, nullptr, &err);
-  const std::string msg = err ? err : "";
-  sqlite3_free(err);
-  sqlite3_close(c);
-  REQUIRE_MESSAGE(rc == SQLITE_OK, msg);
-}
+using test::exec_sql;
 
 std::string error_of(const std::function<void()>& f) {
   try {

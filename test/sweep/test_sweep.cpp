@@ -18,6 +18,7 @@
 #include <utility>
 
 #include "../../src/cli/isolated_jobs.hpp"
+#include "../common/sqlite_exec.hpp"
 #include "valvediag/loop_assessment.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sweep_report.hpp"
@@ -278,18 +279,7 @@ TEST_CASE("the results store keeps each sweep and gives a loop's trend, oldest f
   CHECK(!recorded_end_s(db.string(), "FIC101"));  // no recording tables: an error, not a guess
 }
 
-namespace {
-void exec_sql(const fs::path& db, const std::string& sql) {
-  sqlite3* h = nullptr;
-  REQUIRE(sqlite3_open(db.c_str(), &h) == SQLITE_OK);
-  char* err = nullptr;
-  const int rc = sqlite3_exec(h, sql.c_str(), nullptr, nullptr, &err);
-  const std::string msg = err ? err : "";
-  sqlite3_free(err);
-  sqlite3_close(h);
-  REQUIRE_MESSAGE(rc == SQLITE_OK, msg);
-}
-}  // namespace
+using test::exec_sql;
 
 TEST_CASE("the results store migrates a database of the first release and refuses a newer one") {
   const TempDb tmp(fs::temp_directory_path() /
