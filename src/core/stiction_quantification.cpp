@@ -293,7 +293,6 @@ class HeDataFit {
       n += 1;
     }
     var_y_ = n > 0 ? syy - sy * sy / n : 0.0;
-    yy_ = syy;
     set_poles(identity_ ? std::vector<double>{} : m.a);
   }
   bool usable() const {
@@ -303,27 +302,30 @@ class HeDataFit {
   double var_y() const { return var_y_; }
   const std::vector<double>& poles() const { return a_; }
   int delay() const { return nk_; }
-  void set_delay(int nk) { nk_ = std::max(0, nk); }
+  // At most what the scored rows leave room for (t0_ - dj >= 0 for every tap of B).
+  void set_delay(int nk) { nk_ = std::clamp(nk, 0, std::max(0, static_cast<int>(t0_) - nb_ - 1)); }
   // A's coefficients; the fixed regressors (the constant and the free responses) through 1/A,
-  // and their sums of products, which do not depend on the valve.
+  // and their sums of products, which do not depend on the valve. They sit in the columns after
+  // B's taps of one regressor matrix (scored rows only), with y last, so that a candidate's
+  // normal equations are one matrix product.
   void set_poles(const std::vector<double>& a) {
     a_ = a;
     const std::size_t N = u_.size();
-    fixed_.clear();
-    fixed_.push_back(filter(std::vector<double>(N, 1.0)));
-    for (std::size_t k = 0; k < a_.size() && k < N; ++k) {
+    const Eigen::Index rows = scored_rows();
+    const Eigen::Index nf = 1 + static_cast<Eigen::Index>(std::min(a_.size(), N));
+    regressors_.resize(rows, nb_ + nf + 1);
+    auto put = [&](Eigen::Index col, const std::vector<double>& v) {
+      if (rows > 0) regressors_.col(col) = Eigen::Map<const Eigen::VectorXd>(v.data() + t0_, rows);
+    };
+    put(nb_, filter(std::vector<double>(N, 1.0)));
+    for (Eigen::Index k = 1; k < nf; ++k) {
       std::vector<double> d(N, 0.0);
-      d[k] = 1.0;
-      fixed_.push_back(filter(d));
+      d[static_cast<std::size_t>(k - 1)] = 1.0;
+      put(nb_ + k, filter(d));
     }
-    const std::size_t nf = fixed_.size();
-    fixed_gram_.assign(nf * nf, 0.0);
-    fixed_y_.assign(nf, 0.0);
-    for (std::size_t i = 0; i < nf; ++i) {
-      fixed_y_[i] = dot(fixed_[i], y_);
-      for (std::size_t j = 0; j <= i; ++j)
-        fixed_gram_[i * nf + j] = fixed_gram_[j * nf + i] = dot(fixed_[i], fixed_[j]);
-    }
+    put(nb_ + nf, y_);
+    const auto fixed = regressors_.rightCols(nf + 1);
+    fixed_gram_.noalias() = fixed.transpose() * fixed;
   }
 
   // Regions for several bands: R equal parts of [lo, lo + width].
@@ -344,39 +346,25 @@ class HeDataFit {
   }
   // Residual sum of squares of the simulated output for the valve position x.
   double cost(const std::vector<double>& x) const {
-    const std::size_t N = u_.size();
     filter_into(x, f_);
-    // Regressors: B's taps (f delayed), then the fixed ones. Normal equations, scaled.
-    const int nf = static_cast<int>(fixed_.size());
-    const int p = nb_ + nf;
+    // Regressors: B's taps (f delayed), then the fixed ones; normal equations from one product.
+    const Eigen::Index rows = scored_rows();
+    const Eigen::Index nf = regressors_.cols() - nb_ - 1;
+    const int p = nb_ + static_cast<int>(nf);
+    for (int j = 0; j < nb_; ++j) {
+      const std::size_t dj = identity_ ? 0 : static_cast<std::size_t>(nk_ + j + 1);
+      if (rows > 0)
+        regressors_.col(j) = Eigen::Map<const Eigen::VectorXd>(f_.data() + t0_ - dj, rows);
+    }
+    products_.noalias() = regressors_.leftCols(nb_).transpose() * regressors_;
     Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 8, 8> G(p, p);
     Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> r(p);
-    auto tap = [&](int j) { return identity_ ? 0 : static_cast<std::size_t>(nk_ + j + 1); };
-    for (int j = 0; j < nb_; ++j) {
-      const std::size_t dj = tap(j);
-      double sy = 0;
-      for (std::size_t t = t0_; t < N; ++t) sy += f_[t - dj] * y_[t];
-      r(j) = sy;
-      for (int k = 0; k <= j; ++k) {
-        const std::size_t dk = tap(k);
-        double s = 0;
-        for (std::size_t t = t0_; t < N; ++t) s += f_[t - dj] * f_[t - dk];
-        G(j, k) = G(k, j) = s;
-      }
-      for (int k = 0; k < nf; ++k) {
-        const auto& g = fixed_[static_cast<std::size_t>(k)];
-        double s = 0;
-        for (std::size_t t = t0_; t < N; ++t) s += f_[t - dj] * g[t];
-        G(j, nb_ + k) = G(nb_ + k, j) = s;
-      }
-    }
-    for (int i = 0; i < nf; ++i) {
-      r(nb_ + i) = fixed_y_[static_cast<std::size_t>(i)];
-      for (int k = 0; k < nf; ++k)
-        G(nb_ + i, nb_ + k) =
-            fixed_gram_[static_cast<std::size_t>(i) * static_cast<std::size_t>(nf) +
-                        static_cast<std::size_t>(k)];
-    }
+    G.topRows(nb_) = products_.leftCols(p);
+    G.bottomLeftCorner(nf, nb_) = products_.middleCols(nb_, nf).transpose();
+    G.bottomRightCorner(nf, nf) = fixed_gram_.topLeftCorner(nf, nf);
+    r.head(nb_) = products_.col(p);
+    r.tail(nf) = fixed_gram_.col(nf).head(nf);
+    const double yy = fixed_gram_(nf, nf);
     // Scaled, with a tiny ridge: the constant and a slow free response are nearly collinear.
     const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> sc =
         G.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
@@ -385,7 +373,7 @@ class HeDataFit {
     Gs.diagonal().array() += 1e-10;
     const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> rs = sc.asDiagonal() * r;
     const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> th = Gs.ldlt().solve(rs);
-    return std::max(0.0, yy_ - th.dot(rs));
+    return std::max(0.0, yy - th.dot(rs));
   }
 
  private:
@@ -429,11 +417,8 @@ class HeDataFit {
     filter_into(in, z);
     return z;
   }
-  // Over the scored samples.
-  double dot(const std::vector<double>& p, const std::vector<double>& q) const {
-    double s = 0;
-    for (std::size_t t = t0_; t < u_.size(); ++t) s += p[t] * q[t];
-    return s;
+  Eigen::Index scored_rows() const {
+    return t0_ < u_.size() ? static_cast<Eigen::Index>(u_.size() - t0_) : 0;
   }
   const std::vector<double>& u_;
   const std::vector<double>& y_;
@@ -441,9 +426,11 @@ class HeDataFit {
   std::vector<double> a_;
   int nb_ = 1, nk_ = 0;
   std::size_t t0_ = 0;
-  std::vector<std::vector<double>> fixed_;
-  std::vector<double> fixed_gram_, fixed_y_;
-  double var_y_ = 0.0, yy_ = 0.0;
+  // Scored rows: B's taps (rewritten for each candidate), the fixed regressors, y.
+  mutable Eigen::MatrixXd regressors_;
+  Eigen::MatrixXd fixed_gram_;        // products of the fixed regressors and y
+  mutable Eigen::MatrixXd products_;  // B's taps against every column
+  double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
   mutable std::vector<double> x_, f_;  // scratch
 };
