@@ -70,7 +70,10 @@ struct DiagnosisStep {
 
 struct Diagnosis {
   std::vector<DiagnosisStep> steps;  // one without --auto; the climbed ladder with it
-  std::string conclusion;            // what is left (noise level, unexplained intervals)
+  // The climb's start when it went on from `integrator` because the first step was stable only
+  // by force (ModelFit::forced_stable): the whole-record test measures against that step.
+  std::size_t start = 0;
+  std::string conclusion;  // what is left (noise level, unexplained intervals)
   // The limit-cycle test (limit_cycle.hpp) with the first step's model: in an oscillating loop,
   // the evidence of a stick-slip cycle that trial fits can miss (a slip exactly at each OP
   // reversal leaves a fitted friction threshold no margin).

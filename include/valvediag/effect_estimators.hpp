@@ -59,6 +59,9 @@ struct LinearFit {
   std::vector<double> drift_knots;  // d at the knots (empty without drift)
   double sse = std::numeric_limits<double>::infinity();  // simulated output, estimation window
   double fitness_percent = std::numeric_limits<double>::quiet_NaN();
+  // Least squares gave an unstable A for this structure: the fit started from A with its roots
+  // outside the unit circle reflected inside (fit_output_error).
+  bool forced_stable = false;
 };
 
 // The linear half of the separable problem for one output record. Everything that does not
@@ -81,7 +84,10 @@ class ArxEstimator {
   // iterate, A and B fitted again): least squares on the equation error is biased when the
   // noise is coloured (load noise, closed loop), which hides extra lags and dead time. The
   // iterate with the smallest simulated-output error is kept, so a refined structure never
-  // scores worse than its least-squares fit. Without drift terms only (with them: fit(x, true)).
+  // scores worse than its least-squares fit. A structure whose least-squares A is unstable (a
+  // long closed-loop record biases the equation error past the unit circle) starts from A with
+  // its outside roots reflected inside, and counts only when its refined fit beats the record's
+  // mean (fitness above 0). Without drift terms only (with them: fit(x, true)).
   LinearFit fit_output_error(const std::vector<double>& x, int iterations) const;
   // Simulated output over the whole record (samples before start() copied from y; the drift
   // held after end()).

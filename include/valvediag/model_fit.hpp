@@ -72,6 +72,10 @@ struct ModelFit {
   std::vector<FittedEffect> effects;  // one per effect of the spec, same order
   ArxStructure structure;
   bool integrating = false;  // A = (1 - q^-1) A'(q^-1): a, b, c belong to the differenced form
+  // Least squares gave no stable A for the chosen structure; its output-error fit started from
+  // the reflected poles (ArxEstimator::fit_output_error). A level fitted as self-regulating can
+  // land here: the climb then tries `integrator` first.
+  bool forced_stable = false;
   std::vector<double> a, b;
   double c = 0.0;
   // Estimated slow load d(t) (empty without `disturbance`). On the held-out part it is predicted

@@ -375,11 +375,11 @@ std::string conclusion_of(const DiagnosisStep& s, double Ts, double origin,
   return c + ".";
 }
 
-// The step the climb starts from: the first with a stable model (diagnose_auto goes on from
-// `integrator` when `linear` has none), else the first.
+// The step the climb starts from: the first with a stable model from d.start on (diagnose_auto
+// goes on from `integrator` when `linear` has none, or one only by force), else the first.
 const DiagnosisStep& start_step(const Diagnosis& d) {
-  for (const auto& s : d.steps)
-    if (s.fit.status != ModelFitStatus::NoStableModel) return s;
+  for (std::size_t i = d.start; i < d.steps.size(); ++i)
+    if (d.steps[i].fit.status != ModelFitStatus::NoStableModel) return d.steps[i];
   return d.steps.front();
 }
 
@@ -548,16 +548,25 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
     }
     // A start with no stable linear part leaves its trials nothing to gain against (their
     // gains count from 0). A process that integrates (a level) fitted as self-regulating is the
-    // usual cause: go on from `integrator` when that fits, as the engineer would.
-    if (k == 0 && d.last().fit.status == ModelFitStatus::NoStableModel) {
-      const auto it = std::find_if(f.begin(), f.end(), [](const Finding& x) {
-        return x.effect == "integrator" && std::isfinite(x.trial_fitness_percent);
+    // usual cause: go on from `integrator` when that fits, as the engineer would. The same when
+    // the start is stable only by force (least squares put A past the unit circle) and
+    // `integrator` fits better on both parts.
+    const DiagnosisStep& first = d.last();
+    const bool none = first.fit.status == ModelFitStatus::NoStableModel;
+    if (k == 0 && (none || first.fit.forced_stable)) {
+      const auto it = std::find_if(f.begin(), f.end(), [&](const Finding& x) {
+        return x.effect == "integrator" && std::isfinite(x.trial_fitness_percent) &&
+               (none || (x.estimation_gain_percent > 0 && x.validation_gain_percent > 0));
       });
       if (it != f.end() && k < opt.max_steps) {
         restart = "`" + to_string(model) +
-                  "` has no stable linear part on this record, so the climb went on from `" +
-                  to_string(it->trial_spec) + "` (a process that integrates).";
+                  (none ? "` has no stable linear part on this record"
+                        : "` is stable on this record only by force (least squares put its "
+                          "poles past the unit circle) and `integrator` fits better") +
+                  ", so the climb went on from `" + to_string(it->trial_spec) +
+                  "` (a process that integrates).";
         model = it->trial_spec;
+        if (!none) d.start = 1;
         continue;
       }
     }

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <complex>
 #include <limits>
 #include <optional>
 #include <stdexcept>
@@ -53,6 +54,31 @@ bool stable(const std::vector<double>& a) {
   if (a.size() == 1) return std::abs(a[0]) < 1.0 - 1e-9;
   if (a.size() == 2) return std::abs(a[1]) < 1.0 - 1e-9 && std::abs(a[0]) < 1.0 + a[1] - 1e-9;
   return is_stable(a);
+}
+
+// A's roots outside the unit circle reflected inside (z -> 1 / conj(z)), roots on it pulled to
+// radius 0.999: the stable A with the same spectrum magnitude, the usual start for an output-error
+// fit when least squares gives an unstable A. False when A has non-finite coefficients.
+bool reflect_unstable_poles(std::vector<double>& a) {
+  const auto na = static_cast<Eigen::Index>(a.size());
+  if (na == 0) return true;
+  for (double v : a)
+    if (!std::isfinite(v)) return false;
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(na, na);
+  for (Eigen::Index i = 0; i < na; ++i) C(0, i) = -a[static_cast<std::size_t>(i)];
+  for (Eigen::Index i = 1; i < na; ++i) C(i, i - 1) = 1.0;
+  Eigen::EigenSolver<Eigen::MatrixXd> es(C, false);
+  if (es.info() != Eigen::Success) return false;
+  Eigen::VectorXcd poly = Eigen::VectorXcd::Zero(na + 1);
+  poly[0] = 1.0;
+  for (Eigen::Index k = 0; k < na; ++k) {
+    std::complex<double> z = es.eigenvalues()[k];
+    const double m = std::abs(z);
+    if (m >= 1.0 - 1e-6) z = (m > 1.0 + 1e-6 ? 1.0 / std::conj(z) : z / m * 0.999);
+    for (Eigen::Index i = k + 1; i >= 1; --i) poly[i] -= z * poly[i - 1];
+  }
+  for (Eigen::Index i = 0; i < na; ++i) a[static_cast<std::size_t>(i)] = poly[i + 1].real();
+  return stable(a);
 }
 
 template <std::size_t NA, std::size_t NB, bool Integrating>
@@ -692,8 +718,23 @@ LinearFit ArxEstimator::fit_output_error(const std::vector<double>& x, int itera
   for (int nk = r.nk_min; nk <= r.nk_max; ++nk)
     for (int na = r.na_min; na <= r.na_max; ++na)
       for (int nb = r.nb_min; nb <= r.nb_max; ++nb) {
-        const LinearFit f = solve(g, ArxStructure{na, nb, nk}, x);
-        if (f.ok) fits.push_back(refine(f, x, iterations));
+        LinearFit f;
+        bool reflected = false;
+        if (coefficients(g, ArxStructure{na, nb, nk}, f)) {
+          score(f, window_sse(f, x), kInf);
+        } else if (static_cast<int>(f.a.size()) == na && static_cast<int>(f.b.size()) == nb &&
+                   !stable(f.a) && reflect_unstable_poles(f.a)) {
+          // Solved, but A is unstable (a failed solve leaves a and b empty).
+          score(f, window_sse(f, x), kInf);
+          reflected = true;
+        }
+        if (!f.ok) continue;
+        f = refine(f, x, iterations);
+        f.forced_stable = reflected;
+        // Forced stable, a model that does worse than the record's mean is no model (an
+        // integrating process): the caller's "no stable linear part" path stays open for it.
+        if (reflected && !(f.fitness_percent > 0)) continue;
+        fits.push_back(std::move(f));
       }
   return pick(fits);
 }

@@ -760,6 +760,11 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
     finish(fit);
     return fit;
   }
+  fit.forced_stable = f.forced_stable;
+  if (f.forced_stable)
+    fit.stop_reason +=
+        "; least squares gave no stable A, so the output-error fit started from "
+        "its poles reflected inside the unit circle";
   fit.structure = f.structure;
   fit.a = f.a;
   fit.b = f.b;
