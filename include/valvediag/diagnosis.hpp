@@ -70,8 +70,9 @@ struct DiagnosisStep {
 
 struct Diagnosis {
   std::vector<DiagnosisStep> steps;  // one without --auto; the climbed ladder with it
-  // The climb's start when it went on from `integrator` because the first step was stable only
-  // by force (ModelFit::forced_stable): the whole-record test measures against that step.
+  // The climb's start: 1 when it went on from `integrator` because the first step had no stable
+  // linear part or one only by force (ModelFit::forced_stable); the whole-record test measures
+  // against that step.
   std::size_t start = 0;
   std::string conclusion;  // what is left (noise level, unexplained intervals)
   // The limit-cycle test (limit_cycle.hpp) with the first step's model: in an oscillating loop,

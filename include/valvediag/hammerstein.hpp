@@ -4,7 +4,9 @@
 // With the identity linear block (valve position measured), y(t) = x(t) + c.
 #pragma once
 
+#include <complex>
 #include <cstddef>
+#include <optional>
 #include <vector>
 
 #include "valvediag/preisach.hpp"
@@ -45,6 +47,8 @@ double fitness_percent(const std::vector<double>& y, const std::vector<double>& 
 
 // True when all roots of A(z) lie strictly inside the unit circle (margin on the radius).
 bool is_stable(const std::vector<double>& a, double margin = 1e-9);
+// Roots of A(z) (the poles; empty for na = 0), nullopt when the eigen-solve fails.
+std::optional<std::vector<std::complex<double>>> poles_of(const std::vector<double>& a);
 // Largest root modulus of A(z) (0 for na = 0).
 double spectral_radius(const std::vector<double>& a);
 

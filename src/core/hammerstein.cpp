@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 namespace valvediag {
 
@@ -59,16 +60,26 @@ double fitness_percent(const std::vector<double>& y, const std::vector<double>& 
   return (1.0 - std::sqrt(num / den)) * 100.0;
 }
 
-double spectral_radius(const std::vector<double>& a) {
+std::optional<std::vector<std::complex<double>>> poles_of(const std::vector<double>& a) {
   const auto na = static_cast<Eigen::Index>(a.size());
-  if (na == 0) return 0.0;
+  if (na == 0) return std::vector<std::complex<double>>{};
   // Companion matrix of z^na + a1 z^(na-1) + ... + a_na.
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(na, na);
   for (Eigen::Index i = 0; i < na; ++i) C(0, i) = -a[static_cast<std::size_t>(i)];
   for (Eigen::Index i = 1; i < na; ++i) C(i, i - 1) = 1.0;
   Eigen::EigenSolver<Eigen::MatrixXd> es(C, false);
-  if (es.info() != Eigen::Success) return std::numeric_limits<double>::infinity();
-  return es.eigenvalues().cwiseAbs().maxCoeff();
+  if (es.info() != Eigen::Success) return std::nullopt;
+  const Eigen::VectorXcd& ev = es.eigenvalues();
+  return std::vector<std::complex<double>>(ev.data(), ev.data() + ev.size());
+}
+
+double spectral_radius(const std::vector<double>& a) {
+  if (a.empty()) return 0.0;
+  const auto p = poles_of(a);
+  if (!p) return std::numeric_limits<double>::infinity();
+  double r = 0.0;
+  for (const auto& z : *p) r = std::max(r, std::abs(z));
+  return r;
 }
 
 bool is_stable(const std::vector<double>& a, double margin) {

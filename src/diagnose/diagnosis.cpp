@@ -566,7 +566,7 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
                   ", so the climb went on from `" + to_string(it->trial_spec) +
                   "` (a process that integrates).";
         model = it->trial_spec;
-        if (!none) d.start = 1;
+        d.start = 1;
         continue;
       }
     }

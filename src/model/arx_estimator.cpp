@@ -60,19 +60,15 @@ bool stable(const std::vector<double>& a) {
 // radius 0.999: the stable A with the same spectrum magnitude, the usual start for an output-error
 // fit when least squares gives an unstable A. False when A has non-finite coefficients.
 bool reflect_unstable_poles(std::vector<double>& a) {
-  const auto na = static_cast<Eigen::Index>(a.size());
-  if (na == 0) return true;
   for (double v : a)
     if (!std::isfinite(v)) return false;
-  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(na, na);
-  for (Eigen::Index i = 0; i < na; ++i) C(0, i) = -a[static_cast<std::size_t>(i)];
-  for (Eigen::Index i = 1; i < na; ++i) C(i, i - 1) = 1.0;
-  Eigen::EigenSolver<Eigen::MatrixXd> es(C, false);
-  if (es.info() != Eigen::Success) return false;
+  const auto poles = poles_of(a);
+  if (!poles) return false;
+  const auto na = static_cast<Eigen::Index>(a.size());
   Eigen::VectorXcd poly = Eigen::VectorXcd::Zero(na + 1);
   poly[0] = 1.0;
   for (Eigen::Index k = 0; k < na; ++k) {
-    std::complex<double> z = es.eigenvalues()[k];
+    std::complex<double> z = (*poles)[static_cast<std::size_t>(k)];
     const double m = std::abs(z);
     if (m >= 1.0 - 1e-6) z = (m > 1.0 + 1e-6 ? 1.0 / std::conj(z) : z / m * 0.999);
     for (Eigen::Index i = k + 1; i >= 1; --i) poly[i] -= z * poly[i - 1];
@@ -719,15 +715,12 @@ LinearFit ArxEstimator::fit_output_error(const std::vector<double>& x, int itera
     for (int na = r.na_min; na <= r.na_max; ++na)
       for (int nb = r.nb_min; nb <= r.nb_max; ++nb) {
         LinearFit f;
-        bool reflected = false;
-        if (coefficients(g, ArxStructure{na, nb, nk}, f)) {
-          score(f, window_sse(f, x), kInf);
-        } else if (static_cast<int>(f.a.size()) == na && static_cast<int>(f.b.size()) == nb &&
-                   !stable(f.a) && reflect_unstable_poles(f.a)) {
-          // Solved, but A is unstable (a failed solve leaves a and b empty).
-          score(f, window_sse(f, x), kInf);
-          reflected = true;
-        }
+        const bool solved = coefficients(g, ArxStructure{na, nb, nk}, f);
+        // Solved but with A unstable (a failed solve leaves a and b empty): reflect its poles.
+        const bool reflected = !solved && static_cast<int>(f.a.size()) == na &&
+                               static_cast<int>(f.b.size()) == nb && !stable(f.a) &&
+                               reflect_unstable_poles(f.a);
+        if (solved || reflected) score(f, window_sse(f, x), kInf);
         if (!f.ok) continue;
         f = refine(f, x, iterations);
         f.forced_stable = reflected;
