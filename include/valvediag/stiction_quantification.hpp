@@ -48,8 +48,8 @@
 // over (fs, fd) has valleys a tenth of a % wide (one slip a sample late costs more than noise),
 // so: a fine grid (step min(0.1, band/40) %) within `refine_window_steps` grid steps of the
 // probe's figures, the best `refine_starts` separate valleys each polished (linear part, finer
-// grid, twice), the best wins; then the grid again with the winner's linear part, polishing any
-// valley cheaper than the winner there (`refine_rounds`). Per region, the same with one band per
+// grid, twice), the best wins; each point of that grid is scored with poles of its own, the
+// equation error's for its valve (`refine_own_linear`). Per region, the same with one band per
 // region where the valve is held (PositionDependentStiction), region by region, around the overall
 // figures. Measured on 19 simulated loops (4 processes, noise 0.05-0.3, fs 2-10, fd 0.5-4): 19
 // within 20 % or 0.5 % of travel, most within 0.1 %. The regions are equal parts of the OP range,
@@ -77,10 +77,9 @@ struct StictionQuantificationOptions {
   double refine_window_steps = 3.0;
   int refine_passes = 2;  // re-estimations of the linear part's poles and delay
   int refine_starts = 4;  // separate valleys of the coarse search that are polished
-  // Coarse searches: the first with the linear part fitted to the Preisach valve, each further
-  // one with the winner's, polishing the valleys cheaper than the winner there (stops early when
-  // none improves on it).
-  int refine_rounds = 3;
+  // Score each point of the coarse search with poles of its own (the equation error's for its
+  // valve) and polish from them; false: with the poles fitted to the Preisach valve's position.
+  bool refine_own_linear = true;
   bool refine_regions = true;  // per-region bands refined on the data too
   int refine_delay_range = 2;  // delays nk +- this are tried
 };
