@@ -294,6 +294,17 @@ class HeDataFit {
     }
     var_y_ = n > 0 ? syy - sy * sy / n : 0.0;
     set_poles(identity_ ? std::vector<double>{} : m.a);
+    // For ls_poles: sums of products of [y(t), y(t-1) .. y(t-na), 1] over the scored rows; they
+    // do not depend on the valve.
+    const int na = static_cast<int>(a_.size());
+    if (na > 0 && t0_ < N && static_cast<std::size_t>(na) <= t0_) {
+      const auto rows = static_cast<Eigen::Index>(N - t0_);
+      Eigen::MatrixXd Y(rows, na + 2);
+      for (int i = 0; i <= na; ++i)
+        Y.col(i) = Eigen::Map<const Eigen::VectorXd>(y_.data() + t0_ - i, rows);
+      Y.col(na + 1).setOnes();
+      y_lags_ = Y.transpose() * Y;
+    }
   }
   bool usable() const {
     return t0_ + 20 < u_.size() && var_y_ > 0 && nb_ + 1 + static_cast<int>(a_.size()) <= 8;
@@ -301,21 +312,15 @@ class HeDataFit {
   bool identity() const { return identity_; }
   double var_y() const { return var_y_; }
   // Equation-error least squares of A y = B x + c for the valve position x, with the current
-  // delay and orders: the poles, or empty when A comes out unstable. The sums of y's lags do not
-  // depend on the valve: they are made once; x's enter by dot products.
+  // delay and orders: the poles, or empty when A comes out unstable. y's sums come from the
+  // constructor; x's enter by dot products.
   std::vector<double> ls_poles(const std::vector<double>& x) const {
     const int na = static_cast<int>(a_.size());
-    if (na == 0 || identity_ || t0_ >= y_.size()) return {};
+    if (na == 0 || identity_ || y_lags_.rows() != na + 2) return {};
     const auto n = static_cast<Eigen::Index>(y_.size() - t0_);
     auto lag = [&](const std::vector<double>& v, std::size_t d) {
       return Eigen::Map<const Eigen::VectorXd>(v.data() + t0_ - d, n);
     };
-    if (y_lags_.rows() != na + 2) {  // [y(t), y(t-1) .. y(t-na), 1]: their sums of products
-      Eigen::MatrixXd Y(n, na + 2);
-      for (int i = 0; i <= na; ++i) Y.col(i) = lag(y_, static_cast<std::size_t>(i));
-      Y.col(na + 1).setOnes();
-      y_lags_ = Y.transpose() * Y;
-    }
     const int p = na + nb_ + 1;
     Eigen::MatrixXd M(p, p);
     Eigen::VectorXd r(p);
@@ -382,6 +387,7 @@ class HeDataFit {
     return x;
   }
   std::vector<double> valve(double fs, double fd) const { return valve({{fs, fd}}); }
+  void valve(double fs, double fd, std::vector<double>& x) const { valve_into({{fs, fd}}, x); }
   double cost(double fs, double fd) const { return cost(std::vector<Band>{{fs, fd}}); }
   double cost(const std::vector<Band>& bands) const {
     valve_into(bands, x_);
@@ -476,7 +482,7 @@ class HeDataFit {
   double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
   mutable std::vector<double> x_, f_;  // scratch
-  mutable Eigen::MatrixXd y_lags_;     // ls_poles: sums of products of y's lags and 1
+  Eigen::MatrixXd y_lags_;             // sums of products of y's lags and 1 (ls_poles)
 };
 
 // The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
@@ -780,16 +786,17 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // that part: on paper Example 1 with fit's default orders it put the true valley below one at
   // fd 1.0-1.5 (against 3.5) on seeds 1 and 11 of 16 and on the demo's record, and the polish
   // refined the wrong one.
+  // Both at the start delay.
   const bool own = opt.refine_own_linear && arx;
   auto poles_for = [&](const std::vector<double>& x) {
-    fit.set_delay(nk_start);
     std::vector<double> a = own ? fit.ls_poles(x) : std::vector<double>{};
     return a.empty() ? a_start : a;
   };
   std::vector<Point> pts;
+  std::vector<double> x;  // reused: a long record's valve position is not allocated per point
   for (double fs = std::max(0.0, fs0 - W); fs <= std::min(fs0 + W, width) + 1e-9; fs += h)
     for (double fd = 0.0; fd <= std::min(fs, fd0 + W) + 1e-9; fd += h) {
-      const std::vector<double> x = fit.valve(fs, fd);
+      fit.valve(fs, fd, x);
       if (own) fit.set_poles(poles_for(x));
       pts.push_back({fit.cost(x), fs, fd});
     }
@@ -805,9 +812,9 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   Point best{std::numeric_limits<double>::infinity(), fs0, fd0};
   std::vector<double> best_poles = a_start;
   for (Point cur : starts) {
+    fit.set_delay(nk_start);  // the last start's polish moved it
     const std::vector<double> from = poles_for(fit.valve(cur.fs, cur.fd));
     fit.set_poles(from);
-    fit.set_delay(nk_start);
     for (int pass = 0; pass < (arx ? opt.refine_passes : 1); ++pass) {
       if (arx) refine_linear(fit.valve(cur.fs, cur.fd));
       cur.cost = fit.cost(cur.fs, cur.fd);
