@@ -6,14 +6,15 @@
 # every trial fit repeats, beside a plain scan of every structure (the same answer, checked;
 # SEARCH_REPS, default 5, runs). Then the sweep's throughput: six simulated loops swept on one
 # core (the baseline), with --jobs 1 (each loop's fits threaded over the cores) and with one loop
-# per core; SWEEP_REPS (default 3) runs each, medians and speed-ups. Arguments go to the first
-# part.
+# per core; SWEEP_REPS (default 3) runs each, medians and speed-ups. Then the stiction
+# quantification at 3000-48000 samples beside computing every valve path (QUANT_REPS, default 3,
+# runs). Arguments go to the first part.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)" --target valvediag_bench valvediag_load_bench \
-  valvediag_structure_bench valvediag >/dev/null
+  valvediag_structure_bench valvediag_quantification_bench valvediag >/dev/null
 build/bench/valvediag_bench "$@"
 echo
 echo "== recorder load"
@@ -51,3 +52,7 @@ awk -v base="$base" -v one="$one" -v all="$all" -v c="$cores" -v r="$reps" 'BEGI
   printf "  --jobs %d, 1 thread:   %6.2f s, %5.1f loops/min, %.2f x the baseline\n", c, all, 6 * 60 / all, base / all
   printf "  (medians of %d runs)\n", r
 }'
+
+echo
+echo "== stiction quantification"
+build/bench/valvediag_quantification_bench "${QUANT_REPS:-3}"

@@ -82,6 +82,11 @@ struct StictionQuantificationOptions {
   bool refine_own_linear = true;
   bool refine_regions = true;  // per-region bands refined on the data too
   int refine_delay_range = 2;  // delays nk +- this are tried
+  // Score a valve path once: the probe's samples merged into runs of one grid level, and a
+  // candidate's cost remembered by its position's fingerprint (a hash of its slips) while the
+  // linear part stays. false: every sample and every candidate computed (the benchmark's
+  // baseline; the same figures).
+  bool reuse_costs = true;
 };
 
 // He's figures, % of valve travel (OP units). NaN when they cannot be measured.

@@ -4,10 +4,14 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <stdexcept>
+#include <unordered_map>
 
 namespace valvediag {
 namespace {
@@ -179,6 +183,15 @@ struct Sums {
     shh += H * H;
     sph += P * H;
   }
+  // A run of samples at one H: r holds their n, sums of P and of P^2.
+  void add_run(const Sums& r, double H) {
+    n += r.n;
+    sp += r.sp;
+    spp += r.spp;
+    sh += r.n * H;
+    shh += r.n * H * H;
+    sph += r.sp * H;
+  }
   double var_p() const { return n > 0 ? spp - sp * sp / n : 0.0; }
   // Residual sum of squares with s and c free (s > 0), and that s.
   double cost_free(double* s_out) const {
@@ -202,19 +215,52 @@ struct Sums {
   }
 };
 
+// The probe's samples merged into runs of one grid level (and one set they count in): He's
+// valve does not move while its input stays put, so a run's samples enter the sums together,
+// and a pass costs the level changes, not the samples.
+struct Runs {
+  std::vector<double> uq;
+  std::vector<char> scored;
+  std::vector<int> region;
+  std::vector<Sums> x;  // the run's Preisach positions less their mean (H left 0)
+  // Subtracted from He's position: the sums are of deviations, not of ~50 % levels, so that
+  // costs that differ far below the variance are not lost to cancellation.
+  double centre = 0.0;
+};
+
+Runs runs_of(const Probe& p, const std::vector<int>& region_of_sample, bool merge) {
+  Runs r;
+  double x_mean = 0.0;
+  for (std::size_t t = 0; t < p.u.size(); ++t) {
+    x_mean += p.x[t] / static_cast<double>(p.u.size());
+    r.centre += p.uq[t] / static_cast<double>(p.u.size());
+  }
+  for (std::size_t t = 0; t < p.u.size(); ++t) {
+    const int reg = region_of_sample.empty() ? -1 : region_of_sample[t];
+    if (r.uq.empty() || !merge || p.uq[t] != r.uq.back() || p.scored[t] != r.scored.back() ||
+        reg != r.region.back()) {
+      r.uq.push_back(p.uq[t]);
+      r.scored.push_back(p.scored[t]);
+      r.region.push_back(reg);
+      r.x.emplace_back();
+    }
+    r.x.back().add(p.x[t] - x_mean, 0.0);
+  }
+  return r;
+}
+
 // One pass of He (fs, fd) over the probe: sums over the overall set and per region.
-void accumulate(const Probe& p, double fs, double fd, double phase_fraction,
-                const std::vector<int>& region_of_sample, int regions, Sums& overall,
-                std::vector<Sums>& per_region) {
+void accumulate(const Runs& runs, double fs, double fd, double phase_fraction, int regions,
+                Sums& overall, std::vector<Sums>& per_region) {
   He he{fs, fd};
-  he.reset(p.uq.front(), phase_fraction * (fs - fd));
+  he.reset(runs.uq.front(), phase_fraction * (fs - fd));
   overall = Sums{};
   per_region.assign(static_cast<std::size_t>(regions), Sums{});
-  for (std::size_t t = 0; t < p.u.size(); ++t) {
-    const double H = he.step(p.uq[t]);
-    if (p.scored[t]) overall.add(p.x[t], H);
-    const int r = region_of_sample.empty() ? -1 : region_of_sample[t];
-    if (r >= 0) per_region[static_cast<std::size_t>(r)].add(p.x[t], H);
+  for (std::size_t i = 0; i < runs.uq.size(); ++i) {
+    const double H = he.step(runs.uq[i]) - runs.centre;
+    if (runs.scored[i]) overall.add_run(runs.x[i], H);
+    if (runs.region[i] >= 0)
+      per_region[static_cast<std::size_t>(runs.region[i])].add_run(runs.x[i], H);
   }
 }
 
@@ -268,8 +314,8 @@ struct Band {
 class HeDataFit {
  public:
   HeDataFit(const HammersteinModel& m, const std::vector<double>& op, const std::vector<double>& y,
-            double width, int max_delay)
-      : u_(op), y_(y) {
+            double width, int max_delay, bool remember)
+      : u_(op), y_(y), ones_(op.size(), 1.0), remember_(remember) {
     identity_ = m.block == LinearBlock::Identity;
     if (!identity_) {
       nb_ = std::max<int>(1, static_cast<int>(m.b.size()));
@@ -298,49 +344,51 @@ class HeDataFit {
     // do not depend on the valve.
     const int na = static_cast<int>(a_.size());
     if (na > 0 && t0_ < N && static_cast<std::size_t>(na) <= t0_) {
-      const auto rows = static_cast<Eigen::Index>(N - t0_);
-      Eigen::MatrixXd Y(rows, na + 2);
-      for (int i = 0; i <= na; ++i)
-        Y.col(i) = Eigen::Map<const Eigen::VectorXd>(y_.data() + t0_ - i, rows);
-      Y.col(na + 1).setOnes();
-      y_lags_ = Y.transpose() * Y;
+      Columns c;
+      for (int i = 0; i <= na; ++i) c.add(y_, static_cast<std::size_t>(i));
+      c.add(ones_, 0);
+      y_lags_.resize(c.n, c.n);
+      scored_dots(c, c, y_lags_);
     }
   }
   bool usable() const {
-    return t0_ + 20 < u_.size() && var_y_ > 0 && nb_ + 1 + static_cast<int>(a_.size()) <= 8;
+    return t0_ + 20 < u_.size() && var_y_ > 0 &&
+           nb_ + 1 + static_cast<int>(a_.size()) <= static_cast<int>(kMaxColumns) - 1;
   }
   bool identity() const { return identity_; }
   double var_y() const { return var_y_; }
   // Equation-error least squares of A y = B x + c for the valve position x, with the current
   // delay and orders: the poles, or empty when A comes out unstable. y's sums come from the
-  // constructor; x's enter by dot products.
+  // constructor; x's enter by products.
   std::vector<double> ls_poles(const std::vector<double>& x) const {
     const int na = static_cast<int>(a_.size());
     if (na == 0 || identity_ || y_lags_.rows() != na + 2) return {};
-    const auto n = static_cast<Eigen::Index>(y_.size() - t0_);
-    auto lag = [&](const std::vector<double>& v, std::size_t d) {
-      return Eigen::Map<const Eigen::VectorXd>(v.data() + t0_ - d, n);
-    };
+    Columns taps, all;
+    for (int i = 0; i <= na; ++i) all.add(y_, static_cast<std::size_t>(i));
+    for (int j = 1; j <= nb_; ++j) {
+      taps.add(x, static_cast<std::size_t>(nk_ + j));
+      all.add(x, static_cast<std::size_t>(nk_ + j));
+    }
+    all.add(ones_, 0);
+    products_.resize(taps.n, all.n);
+    scored_dots(taps, all, products_);
+    // Regressors [-y(t-1) .. -y(t-na), x's taps, 1] against y(t).
     const int p = na + nb_ + 1;
+    const int c = p - 1;
     Eigen::MatrixXd M(p, p);
     Eigen::VectorXd r(p);
-    const int c = p - 1;
     for (int i = 1; i <= na; ++i) {
       for (int k = 1; k <= na; ++k) M(i - 1, k - 1) = y_lags_(i, k);
       M(i - 1, c) = M(c, i - 1) = -y_lags_(i, na + 1);
       r(i - 1) = -y_lags_(0, i);
     }
-    for (int j = 1; j <= nb_; ++j) {
-      const auto xj = lag(x, static_cast<std::size_t>(nk_ + j));
-      for (int i = 1; i <= na; ++i)
-        M(i - 1, na + j - 1) = M(na + j - 1, i - 1) = -xj.dot(lag(y_, static_cast<std::size_t>(i)));
-      for (int k = j; k <= nb_; ++k)
-        M(na + j - 1, na + k - 1) = M(na + k - 1, na + j - 1) =
-            xj.dot(lag(x, static_cast<std::size_t>(nk_ + k)));
-      M(na + j - 1, c) = M(c, na + j - 1) = xj.sum();
-      r(na + j - 1) = xj.dot(lag(y_, 0));
+    for (int j = 0; j < nb_; ++j) {
+      for (int i = 1; i <= na; ++i) M(i - 1, na + j) = M(na + j, i - 1) = -products_(j, i);
+      for (int k = 0; k < nb_; ++k) M(na + j, na + k) = products_(j, na + 1 + k);
+      M(na + j, c) = M(c, na + j) = products_(j, na + 1 + nb_);
+      r(na + j) = products_(j, 0);
     }
-    M(c, c) = static_cast<double>(n);
+    M(c, c) = static_cast<double>(u_.size() - t0_);
     r(c) = y_lags_(0, na + 1);
     M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
     const Eigen::VectorXd th = M.ldlt().solve(r);
@@ -351,29 +399,15 @@ class HeDataFit {
   const std::vector<double>& poles() const { return a_; }
   int delay() const { return nk_; }
   // At most what the scored rows leave room for (t0_ - dj >= 0 for every tap of B).
-  void set_delay(int nk) { nk_ = std::clamp(nk, 0, std::max(0, static_cast<int>(t0_) - nb_ - 1)); }
-  // A's coefficients; the fixed regressors (the constant and the free responses) through 1/A,
-  // and their sums of products, which do not depend on the valve. They sit in the columns after
-  // B's taps of one regressor matrix (scored rows only), with y last, so that a candidate's
-  // normal equations are one matrix product.
+  void set_delay(int nk) {
+    nk_ = std::clamp(nk, 0, std::max(0, static_cast<int>(t0_) - nb_ - 1));
+    costs_.clear();
+  }
+  // A's coefficients. The fixed regressors that go with them are made by the next cost().
   void set_poles(const std::vector<double>& a) {
     a_ = a;
-    const std::size_t N = u_.size();
-    const Eigen::Index rows = scored_rows();
-    const Eigen::Index nf = 1 + static_cast<Eigen::Index>(std::min(a_.size(), N));
-    regressors_.resize(rows, nb_ + nf + 1);
-    auto put = [&](Eigen::Index col, const std::vector<double>& v) {
-      if (rows > 0) regressors_.col(col) = Eigen::Map<const Eigen::VectorXd>(v.data() + t0_, rows);
-    };
-    put(nb_, filter(std::vector<double>(N, 1.0)));
-    for (Eigen::Index k = 1; k < nf; ++k) {
-      std::vector<double> d(N, 0.0);
-      d[static_cast<std::size_t>(k - 1)] = 1.0;
-      put(nb_ + k, filter(d));
-    }
-    put(nb_ + nf, y_);
-    const auto fixed = regressors_.rightCols(nf + 1);
-    fixed_gram_.noalias() = fixed.transpose() * fixed;
+    costs_.clear();
+    fixed_ready_ = false;
   }
 
   // Regions for several bands: R equal parts of [lo, lo + width].
@@ -387,27 +421,37 @@ class HeDataFit {
     return x;
   }
   std::vector<double> valve(double fs, double fd) const { return valve({{fs, fd}}); }
-  void valve(double fs, double fd, std::vector<double>& x) const { valve_into({{fs, fd}}, x); }
+  // Returns the position's fingerprint (see valve_into).
+  std::uint64_t valve(double fs, double fd, std::vector<double>& x) const {
+    return valve_into({{fs, fd}}, x);
+  }
   double cost(double fs, double fd) const { return cost(std::vector<Band>{{fs, fd}}); }
+  // Remembered per valve position while the linear part stays: neighbouring bands often slip on
+  // the same samples.
   double cost(const std::vector<Band>& bands) const {
-    valve_into(bands, x_);
-    return cost(x_);
+    const std::uint64_t key = valve_into(bands, x_);
+    if (!remember_) return cost(x_);
+    const auto hit = costs_.find(key);
+    if (hit != costs_.end()) return hit->second;
+    return costs_[key] = cost(x_);
   }
   // Residual sum of squares of the simulated output for the valve position x.
   double cost(const std::vector<double>& x) const {
-    filter_into(x, f_);
-    // Regressors: B's taps (f delayed), then the fixed ones; normal equations from one product.
-    const Eigen::Index rows = scored_rows();
-    const Eigen::Index nf = regressors_.cols() - nb_ - 1;
+    filter(x);
+    // Regressors: B's taps (x through 1/A, delayed), then the fixed ones, then y.
+    Columns taps;
+    for (int j = 0; j < nb_; ++j)
+      taps.add(f_, identity_ ? 0 : static_cast<std::size_t>(nk_ + j + 1));
+    Columns all = taps;
+    const Columns fixed = fixed_columns();
+    for (int k = 0; k < fixed.n; ++k)
+      all.c[static_cast<std::size_t>(all.n++)] = fixed.c[static_cast<std::size_t>(k)];
+    products_.resize(taps.n, all.n);
+    scored_dots(taps, all, products_);
+    const Eigen::Index nf = fixed.n - 1;
     const int p = nb_ + static_cast<int>(nf);
-    for (int j = 0; j < nb_; ++j) {
-      const std::size_t dj = identity_ ? 0 : static_cast<std::size_t>(nk_ + j + 1);
-      if (rows > 0)
-        regressors_.col(j) = Eigen::Map<const Eigen::VectorXd>(f_.data() + t0_ - dj, rows);
-    }
-    products_.noalias() = regressors_.leftCols(nb_).transpose() * regressors_;
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 8, 8> G(p, p);
-    Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> r(p);
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxColumns, kMaxColumns> G(p, p);
+    Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxColumns, 1> r(p);
     G.topRows(nb_) = products_.leftCols(p);
     G.bottomLeftCorner(nf, nb_) = products_.middleCols(nb_, nf).transpose();
     G.bottomRightCorner(nf, nf) = fixed_gram_.topLeftCorner(nf, nf);
@@ -415,25 +459,125 @@ class HeDataFit {
     r.tail(nf) = fixed_gram_.col(nf).head(nf);
     const double yy = fixed_gram_(nf, nf);
     // Scaled, with a tiny ridge: the constant and a slow free response are nearly collinear.
-    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> sc =
+    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxColumns, 1> sc =
         G.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 8, 8> Gs =
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxColumns, kMaxColumns> Gs =
         sc.asDiagonal() * G * sc.asDiagonal();
     Gs.diagonal().array() += 1e-10;
-    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> rs = sc.asDiagonal() * r;
-    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 8, 1> th = Gs.ldlt().solve(rs);
+    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxColumns, 1> rs = sc.asDiagonal() * r;
+    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxColumns, 1> th = Gs.ldlt().solve(rs);
     return std::max(0.0, yy - th.dot(rs));
   }
 
  private:
+  static constexpr int kMaxColumns = 10;
+  // Regressor columns as lagged series: column k holds v[t - lag] in row t.
+  struct Column {
+    const double* v;
+    std::size_t lag;
+  };
+  struct Columns {
+    std::array<Column, kMaxColumns> c{};
+    int n = 0;
+    void add(const std::vector<double>& v, std::size_t lag) {
+      c[static_cast<std::size_t>(n++)] = {v.data(), lag};
+    }
+  };
+  // The constant and the free responses through 1/A, then y.
+  Columns fixed_columns() const {
+    Columns c;
+    c.add(step_, 0);
+    for (std::size_t k = 0; k < a_.size(); ++k) c.add(impulse_, k);
+    c.add(y_, 0);
+    return c;
+  }
+  // Sums over the scored rows t0 <= t < N of the products of left's and right's columns into
+  // out. A block of rows at a time, so that a column's block is read from memory once and every
+  // product is a vectorised dot product in cache.
+  void scored_dots(const Columns& left, const Columns& right, Eigen::MatrixXd& out) const {
+    constexpr std::size_t kBlock = 512;
+    out.setZero(left.n, right.n);
+    for (std::size_t t = t0_; t < u_.size(); t += kBlock) {
+      const auto len = static_cast<Eigen::Index>(std::min(kBlock, u_.size() - t));
+      auto block = [&](const Column& c) {
+        return Eigen::Map<const Eigen::VectorXd>(c.v + (t - c.lag), len);
+      };
+      for (int i = 0; i < left.n; ++i)
+        for (int j = 0; j < right.n; ++j)
+          out(i, j) += block(left.c[static_cast<std::size_t>(i)])
+                           .dot(block(right.c[static_cast<std::size_t>(j)]));
+    }
+  }
+  // x through 1/A from rest into f_ and, when the poles changed, the fixed regressors (the
+  // constant and the free responses through 1/A) and their sums of products with each other and
+  // y, which do not depend on the valve. The free response of initial state k is the impulse
+  // response delayed by k, and the constant's response the impulse response's running sum.
+  void filter(const std::vector<double>& x) const {
+    const bool fixed = !fixed_ready_;
+    switch (a_.size()) {  // the common orders unrolled: the recursion is the inner loop
+      case 0:
+        fixed ? filter_n<0, true>(x) : filter_n<0, false>(x);
+        break;
+      case 1:
+        fixed ? filter_n<1, true>(x) : filter_n<1, false>(x);
+        break;
+      case 2:
+        fixed ? filter_n<2, true>(x) : filter_n<2, false>(x);
+        break;
+      case 3:
+        fixed ? filter_n<3, true>(x) : filter_n<3, false>(x);
+        break;
+      default:
+        fixed ? filter_n<-1, true>(x) : filter_n<-1, false>(x);
+    }
+    if (fixed) {
+      const Columns c = fixed_columns();
+      fixed_gram_.resize(c.n, c.n);
+      scored_dots(c, c, fixed_gram_);
+      fixed_ready_ = true;
+    }
+  }
+  // The recursions of x and of the impulse response in one loop: their latencies overlap.
+  template <int NA, bool kFixed>
+  void filter_n(const std::vector<double>& x) const {
+    const std::size_t N = x.size();
+    const std::size_t na = NA >= 0 ? static_cast<std::size_t>(NA) : a_.size();
+    const double* a = a_.data();
+    f_.resize(N);
+    if (kFixed) {
+      impulse_.resize(N);
+      step_.resize(N);
+    }
+    double* f = f_.data();
+    double* h = impulse_.data();
+    double* st = step_.data();
+    double sum = 0.0;
+    for (std::size_t t = 0; t < N; ++t) {
+      double v = x[t], g = t == 0 ? 1.0 : 0.0;
+      const std::size_t k = t >= na ? na : t;
+      for (std::size_t i = 1; i <= k; ++i) {
+        v -= a[i - 1] * f[t - i];
+        if (kFixed) g -= a[i - 1] * h[t - i];
+      }
+      f[t] = v;
+      if (kFixed) {
+        h[t] = g;
+        st[t] = sum += g;
+      }
+    }
+  }
   // He's flowchart as the simulator and a PLC-driven valve see it: the OP is held between
   // samples (zero-order hold), so the valve takes each sample's OP change as one step and slips
   // at most once per sample (the probe's He above mimics the Preisach model's input instead).
   // With several bands, the band of the region the valve is held in applies, as
   // PositionDependentStiction in src/sim has it.
-  void valve_into(const std::vector<Band>& bands, std::vector<double>& x) const {
+  // Returns a fingerprint of the position: a hash of the start and of every slip (sample, new
+  // position). Equal fingerprints mean equal positions (two of 10^4 positions collide with a
+  // chance of 10^-11), so a cost is not computed twice for the same position.
+  std::uint64_t valve_into(const std::vector<Band>& bands, std::vector<double>& x) const {
     const int R = static_cast<int>(bands.size());
     double u_prev = u_.front(), xv = u_prev, u_r = 0.0;
+    std::uint64_t key = mix(std::bit_cast<std::uint64_t>(xv));
     x.resize(u_.size());
     for (std::size_t t = 0; t < u_.size(); ++t) {
       const Band& b = R == 1
@@ -446,28 +590,20 @@ class HeDataFit {
       if (std::abs(u_cum) > b.fs) {
         u_r = u_cum > 0 ? b.fd : -b.fd;
         xv = u_[t] - u_r;
+        key = mix(mix(key ^ t) ^ std::bit_cast<std::uint64_t>(xv));
       } else {
         u_r = u_cum;
       }
       x[t] = xv;
     }
+    return key;
   }
-  // 1/A(q) from rest (no poles: the input itself).
-  void filter_into(const std::vector<double>& in, std::vector<double>& z) const {
-    z.resize(in.size());
-    for (std::size_t t = 0; t < in.size(); ++t) {
-      double v = in[t];
-      for (std::size_t i = 1; i <= a_.size() && i <= t; ++i) v -= a_[i - 1] * z[t - i];
-      z[t] = v;
-    }
-  }
-  std::vector<double> filter(const std::vector<double>& in) const {
-    std::vector<double> z;
-    filter_into(in, z);
-    return z;
-  }
-  Eigen::Index scored_rows() const {
-    return t0_ < u_.size() ? static_cast<Eigen::Index>(u_.size() - t0_) : 0;
+  // splitmix64's finaliser.
+  static std::uint64_t mix(std::uint64_t z) {
+    z += 0x9e3779b97f4a7c15u;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9u;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebu;
+    return z ^ (z >> 31);
   }
   const std::vector<double>& u_;
   const std::vector<double>& y_;
@@ -475,14 +611,19 @@ class HeDataFit {
   std::vector<double> a_;
   int nb_ = 1, nk_ = 0;
   std::size_t t0_ = 0;
-  // Scored rows: B's taps (rewritten for each candidate), the fixed regressors, y.
-  mutable Eigen::MatrixXd regressors_;
-  Eigen::MatrixXd fixed_gram_;        // products of the fixed regressors and y
-  mutable Eigen::MatrixXd products_;  // B's taps against every column
+  const std::vector<double> ones_;  // the constant column of ls_poles
+  // For the poles in a_ once fixed_ready_: 1/A's responses from rest (the fixed regressors) and
+  // the products of the fixed regressors and y.
+  mutable std::vector<double> impulse_, step_;
+  mutable Eigen::MatrixXd fixed_gram_;
+  mutable bool fixed_ready_ = false;
+  Eigen::MatrixXd y_lags_;            // products of y's lags and 1 (ls_poles)
+  mutable Eigen::MatrixXd products_;  // scratch: B's taps against every column
+  const bool remember_;               // costs_ in use
+  mutable std::unordered_map<std::uint64_t, double> costs_;  // by position fingerprint
   double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
   mutable std::vector<double> x_, f_;  // scratch
-  Eigen::MatrixXd y_lags_;             // sums of products of y's lags and 1 (ls_poles)
 };
 
 // The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
@@ -608,6 +749,9 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   struct Best {
     double fs = 0, fd = 0, phase = 0, cost = std::numeric_limits<double>::infinity();
   };
+  // Costs this close are equal: the cost is flat up to rounding over a valley (the slips fall on
+  // the same samples), and which point of it wins must not depend on the order of the sums.
+  auto tie = [&](double c) { return std::isfinite(c) ? c * 1e-9 + 1e-12 * (1.0 + var_all) : 0.0; };
   auto search = [&](auto&& cost_of) {
     Best b;
     auto scan = [&](double fs0, double fs1, double fd0, double fd1, double step,
@@ -617,7 +761,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
           for (double ph : phases) {
             ph -= std::floor(ph);
             const double c = cost_of(fs, fd, ph);
-            if (c < b.cost * (1 - 1e-12)) b = {fs, fd, ph, c};
+            if (c < b.cost - tie(b.cost)) b = {fs, fd, ph, c};
           }
     };
     double step = std::max(delta / 4, width / 40);
@@ -633,7 +777,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
     // The input is on the grid, so the cost is flat over an interval of band and of jump (the
     // slips fall on the same samples): report the middle of the flat part, not its low end. The
     // band is known to a grid step, no better.
-    const double tol = b.cost * 1e-9 + 1e-12 * (1.0 + var_all);
+    const double tol = tie(b.cost);
     auto flat_part = [&](double dband, double djump, bool top) {
       double lo = 0, hi = 0;
       const double h = delta / 16;
@@ -657,14 +801,14 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   };
   Sums sums;
   std::vector<Sums> per_region;
-  const std::vector<int> no_regions;
+  const Runs overall_runs = runs_of(p, {}, opt.reuse_costs);
   const Best best = search([&](double f_s, double f_d, double ph) {
-    accumulate(p, f_s, f_d, ph, no_regions, R, sums, per_region);
+    accumulate(overall_runs, f_s, f_d, ph, R, sums, per_region);
     double s;
     return sums.cost_free(&s);
   });
   const double fs = best.fs, fd = best.fd, cost = best.cost;
-  accumulate(p, fs, fd, best.phase, no_regions, R, sums, per_region);
+  accumulate(overall_runs, fs, fd, best.phase, R, sums, per_region);
   sums.cost_free(&q.scale);
   q.overall = figures(fs, fd, cost, var_all);
   q.stiction = q.scale > 0 && q.overall.band_percent > delta;
@@ -683,6 +827,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   for (std::size_t t = 0; t < p.u.size(); ++t)
     if (p.scored[t] && p.reversal[t] >= 0 && p.since[t] <= window)
       region_of_sample[t] = region_of(p.reversal_u[static_cast<std::size_t>(p.reversal[t])]);
+  const Runs region_runs = runs_of(p, region_of_sample, opt.reuse_costs);
   for (int r = 0; r < R; ++r) {
     auto& reg = q.regions[static_cast<std::size_t>(r)];
     reg.valid = reg.visited && reg.probes > 0;
@@ -692,10 +837,10 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
       continue;
     }
     const Best rb = search([&](double f_s, double f_d, double ph) {
-      accumulate(p, f_s, f_d, ph, region_of_sample, R, sums, per_region);
+      accumulate(region_runs, f_s, f_d, ph, R, sums, per_region);
       return per_region[static_cast<std::size_t>(r)].cost_fixed(q.scale);
     });
-    accumulate(p, rb.fs, rb.fd, rb.phase, region_of_sample, R, sums, per_region);
+    accumulate(region_runs, rb.fs, rb.fd, rb.phase, R, sums, per_region);
     if (per_region[static_cast<std::size_t>(r)].n < 2) {  // no sample after its reversals
       reg.valid = false;
       continue;
@@ -735,7 +880,8 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   const auto to = static_cast<std::ptrdiff_t>(best_from + best_len);
   const std::vector<double> u(op.begin() + from, op.begin() + to);
   const std::vector<double> y(pv.begin() + from, pv.begin() + to);
-  HeDataFit fit(model, u, y, q.op_hi - q.op_lo, model.structure.nk + opt.refine_delay_range);
+  HeDataFit fit(model, u, y, q.op_hi - q.op_lo, model.structure.nk + opt.refine_delay_range,
+                opt.reuse_costs);
   if (!fit.usable()) return q;
 
   const double delta = q.resolution_percent;
@@ -794,11 +940,22 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   };
   std::vector<Point> pts;
   std::vector<double> x;  // reused: a long record's valve position is not allocated per point
+  // Neighbouring points often slip on the same samples (on long records, half of them): a
+  // position's cost, own poles included, is computed once.
+  std::unordered_map<std::uint64_t, double> scored;
   for (double fs = std::max(0.0, fs0 - W); fs <= std::min(fs0 + W, width) + 1e-9; fs += h)
     for (double fd = 0.0; fd <= std::min(fs, fd0 + W) + 1e-9; fd += h) {
-      fit.valve(fs, fd, x);
-      if (own) fit.set_poles(poles_for(x));
-      pts.push_back({fit.cost(x), fs, fd});
+      const std::uint64_t key = fit.valve(fs, fd, x);
+      const auto seen = opt.reuse_costs ? scored.find(key) : scored.end();
+      double c = 0.0;
+      if (seen != scored.end()) {
+        c = seen->second;
+      } else {
+        if (own) fit.set_poles(poles_for(x));
+        c = fit.cost(x);
+        if (opt.reuse_costs) scored.emplace(key, c);
+      }
+      pts.push_back({c, fs, fd});
     }
   std::sort(pts.begin(), pts.end(), [](const Point& l, const Point& r) { return l.cost < r.cost; });
   std::vector<Point> starts;
