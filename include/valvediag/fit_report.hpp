@@ -31,6 +31,7 @@ struct FitContext {
   const std::vector<double>* pv = nullptr;
   // Figures computed once by the caller (the refinement takes seconds); else computed here.
   std::optional<StictionQuantification> stiction;
+  int threads = 0;  // for the refinement (0: all cores)
 };
 
 const char* method_name(FitMethod m);

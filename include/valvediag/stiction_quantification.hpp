@@ -87,6 +87,9 @@ struct StictionQuantificationOptions {
   // linear part stays. false: every sample and every candidate computed (the benchmark's
   // baseline; the same figures).
   bool reuse_costs = true;
+  // Worker threads for the refinement's grid and polish (0: all cores); the figures do not
+  // depend on it.
+  int threads = 0;
 };
 
 // He's figures, % of valve travel (OP units). NaN when they cannot be measured.

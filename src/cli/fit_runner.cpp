@@ -35,6 +35,7 @@ FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& outpu
   ctx.sample_period = d.sample_period();
   ctx.output_name = output;
   ctx.method = method_name(fo.method);
+  ctx.threads = fo.threads;
   if (run.result.status == IdentificationStatus::Ok) {
     ctx.stiction = fit_stiction(run.result, ctx);  // in OP units: % when OP is 0..100
     if (range != OpRange{}) ctx.stiction = in_percent_of_span(*ctx.stiction, range);

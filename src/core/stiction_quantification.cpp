@@ -5,12 +5,16 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <exception>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
+#include <thread>
 #include <unordered_map>
 
 namespace valvediag {
@@ -626,6 +630,36 @@ class HeDataFit {
   mutable std::vector<double> x_, f_;  // scratch
 };
 
+// Workers for `jobs` independent jobs: `threads` (0: all cores), at most one per job.
+unsigned workers_for(int threads, std::size_t jobs) {
+  const unsigned n = threads > 0 ? static_cast<unsigned>(threads)
+                                 : std::max(1u, std::thread::hardware_concurrency());
+  return static_cast<unsigned>(std::clamp<std::size_t>(jobs, 1, n));
+}
+
+// job(worker, i) for every i < n, on `workers` threads (worker < workers); each job's result
+// must not depend on which worker ran it. The first exception stops the others and is rethrown.
+template <class Job>
+void parallel_for(std::size_t n, unsigned workers, Job&& job) {
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr error;
+  std::mutex m;
+  auto work = [&](unsigned w) {
+    try {
+      for (std::size_t i; (i = next.fetch_add(1)) < n;) job(w, i);
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(m);
+      if (!error) error = std::current_exception();
+      next = n;
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned w = 1; w < workers; ++w) pool.emplace_back(work, w);
+  work(0);
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+}
+
 // The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
 // b, c and the initial state by least squares inside. Returns the cost; fit keeps the best poles.
 double refine_poles(HeDataFit& fit, const std::vector<double>& x) {
@@ -888,7 +922,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   const double width = q.op_hi - q.op_lo;
   const double fs0 = q.overall.fs_percent, fd0 = q.overall.fd_percent;
   // The linear part for a valve position x: delay (nk +- the range) and poles by output error.
-  auto refine_linear = [&](const std::vector<double>& x) {
+  auto refine_linear = [&](HeDataFit& fit, const std::vector<double>& x) {
     const std::vector<double> a0 = fit.poles();
     const int nk0 = fit.delay();
     double best = std::numeric_limits<double>::infinity();
@@ -913,7 +947,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // it by output error to the Preisach valve's own position first, so that the search for He's
   // figures starts from poles that do not depend on He's candidate.
   const bool arx = !fit.identity();
-  if (arx) refine_linear(simulate_valve(model, u));
+  if (arx) refine_linear(fit, simulate_valve(model, u));
   const std::vector<double> a_start = fit.poles();
   const int nk_start = fit.delay();
 
@@ -934,29 +968,41 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // refined the wrong one.
   // Both at the start delay.
   const bool own = opt.refine_own_linear && arx;
-  auto poles_for = [&](const std::vector<double>& x) {
+  auto poles_for = [&](const HeDataFit& fit, const std::vector<double>& x) {
     std::vector<double> a = own ? fit.ls_poles(x) : std::vector<double>{};
     return a.empty() ? a_start : a;
   };
   std::vector<Point> pts;
-  std::vector<double> x;  // reused: a long record's valve position is not allocated per point
-  // Neighbouring points often slip on the same samples (on long records, half of them): a
-  // position's cost, own poles included, is computed once.
-  std::unordered_map<std::uint64_t, double> scored;
   for (double fs = std::max(0.0, fs0 - W); fs <= std::min(fs0 + W, width) + 1e-9; fs += h)
-    for (double fd = 0.0; fd <= std::min(fs, fd0 + W) + 1e-9; fd += h) {
-      const std::uint64_t key = fit.valve(fs, fd, x);
-      const auto seen = opt.reuse_costs ? scored.find(key) : scored.end();
-      double c = 0.0;
+    for (double fd = 0.0; fd <= std::min(fs, fd0 + W) + 1e-9; fd += h) pts.push_back({0.0, fs, fd});
+  // The points on all cores, each worker with a fit of its own. Neighbouring points often slip
+  // on the same samples (on long records, half of them): a position's cost, own poles included,
+  // is computed once.
+  const unsigned workers = workers_for(opt.threads, pts.size());
+  std::vector<HeDataFit> fits(workers, fit);
+  std::vector<std::vector<double>> xs(
+      workers);  // a long record's position is not allocated per point
+  std::unordered_map<std::uint64_t, double> scored;
+  std::mutex scored_mutex;
+  parallel_for(pts.size(), workers, [&](unsigned w, std::size_t k) {
+    HeDataFit& f = fits[w];
+    std::vector<double>& x = xs[w];
+    const std::uint64_t key = f.valve(pts[k].fs, pts[k].fd, x);
+    if (opt.reuse_costs) {
+      const std::lock_guard<std::mutex> lock(scored_mutex);
+      const auto seen = scored.find(key);
       if (seen != scored.end()) {
-        c = seen->second;
-      } else {
-        if (own) fit.set_poles(poles_for(x));
-        c = fit.cost(x);
-        if (opt.reuse_costs) scored.emplace(key, c);
+        pts[k].cost = seen->second;
+        return;
       }
-      pts.push_back({c, fs, fd});
     }
+    if (own) f.set_poles(poles_for(f, x));
+    pts[k].cost = f.cost(x);
+    if (opt.reuse_costs) {
+      const std::lock_guard<std::mutex> lock(scored_mutex);
+      scored.emplace(key, pts[k].cost);
+    }
+  });
   std::sort(pts.begin(), pts.end(), [](const Point& l, const Point& r) { return l.cost < r.cost; });
   std::vector<Point> starts;
   for (const Point& pt : pts) {
@@ -966,35 +1012,44 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
       separate = separate && std::max(std::abs(st.fs - pt.fs), std::abs(st.fd - pt.fd)) > delta / 2;
     if (separate) starts.push_back(pt);
   }
-  Point best{std::numeric_limits<double>::infinity(), fs0, fd0};
-  std::vector<double> best_poles = a_start;
-  for (Point cur : starts) {
-    fit.set_delay(nk_start);  // the last start's polish moved it
-    const std::vector<double> from = poles_for(fit.valve(cur.fs, cur.fd));
-    fit.set_poles(from);
+  // Each start polished by a worker with a fit of its own, from the start delay and its own
+  // poles; the best in start order wins.
+  std::vector<Point> polished(starts);
+  std::vector<std::vector<double>> start_poles(starts.size());
+  const unsigned polishers = workers_for(opt.threads, starts.size());
+  std::vector<HeDataFit> pfits(polishers, fit);
+  parallel_for(starts.size(), polishers, [&](unsigned w, std::size_t i) {
+    HeDataFit& f = pfits[w];
+    Point& cur = polished[i];
+    f.set_delay(nk_start);
+    start_poles[i] = poles_for(f, f.valve(cur.fs, cur.fd));
+    f.set_poles(start_poles[i]);
     for (int pass = 0; pass < (arx ? opt.refine_passes : 1); ++pass) {
-      if (arx) refine_linear(fit.valve(cur.fs, cur.fd));
-      cur.cost = fit.cost(cur.fs, cur.fd);
+      if (arx) refine_linear(f, f.valve(cur.fs, cur.fd));
+      cur.cost = f.cost(cur.fs, cur.fd);
       const Point c0 = cur;
       const double hh = h / 4;
       for (double fs = std::max(0.0, c0.fs - 4 * h); fs <= c0.fs + 4 * h + 1e-9; fs += hh)
         for (double fd = std::max(0.0, c0.fd - 4 * h); fd <= std::min(fs, c0.fd + 4 * h) + 1e-9;
              fd += hh) {
-          const double c = fit.cost(fs, fd);
+          const double c = f.cost(fs, fd);
           if (c < cur.cost) cur = {c, fs, fd};
         }
     }
-    if (cur.cost < best.cost) {
-      best = cur;
-      best_poles = from;
+  });
+  Point best{std::numeric_limits<double>::infinity(), fs0, fd0};
+  std::vector<double> best_poles = a_start;
+  for (std::size_t i = 0; i < starts.size(); ++i)
+    if (polished[i].cost < best.cost) {
+      best = polished[i];
+      best_poles = start_poles[i];
     }
-  }
   const double bfs = best.fs, bfd = best.fd, bcost = best.cost;
   // The linear part of the winner, from where its polish started (the loop above leaves the last
   // start's).
   fit.set_poles(best_poles);
   fit.set_delay(nk_start);
-  if (arx) refine_linear(fit.valve(bfs, bfd));
+  if (arx) refine_linear(fit, fit.valve(bfs, bfd));
 
   // Per region: He's bands where the valve sticks in that region (PositionDependentStiction),
   // each region's band searched in turn around the overall figures, the others held, with the
@@ -1008,25 +1063,33 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
       for (int r = 0; r < R; ++r) {
         if (!q.regions[static_cast<std::size_t>(r)].valid) continue;
         Band& b = bands[static_cast<std::size_t>(r)];
+        // This region's band over a grid, the others held: the points on all cores, the first
+        // best in grid order kept.
         auto local = [&](Band centre, double half, double step) {
+          std::vector<std::vector<Band>> sets;
           for (double fs = std::max(0.0, centre.fs - half); fs <= centre.fs + half + 1e-9;
                fs += step)
             for (double fd = std::max(0.0, centre.fd - half);
                  fd <= std::min(fs, centre.fd + half) + 1e-9; fd += step) {
-              const Band keep = b;
-              b = {fs, fd};
-              const double c = fit.cost(bands);
-              if (c < cost)
-                cost = c;
-              else
-                b = keep;
+              sets.push_back(bands);
+              sets.back()[static_cast<std::size_t>(r)] = {fs, fd};
+            }
+          const unsigned n = workers_for(opt.threads, sets.size());
+          std::vector<HeDataFit> fits(n, fit);
+          std::vector<double> costs(sets.size());
+          parallel_for(sets.size(), n,
+                       [&](unsigned w, std::size_t i) { costs[i] = fits[w].cost(sets[i]); });
+          for (std::size_t i = 0; i < sets.size(); ++i)
+            if (costs[i] < cost) {
+              cost = costs[i];
+              b = sets[i][static_cast<std::size_t>(r)];
             }
         };
         if (sweep == 0) local({bfs, bfd}, W, 2 * h);
         local(b, 2 * h, h / 2);
       }
       if (arx) {  // the linear part for the valve with its regions
-        refine_linear(fit.valve(bands));
+        refine_linear(fit, fit.valve(bands));
         cost = fit.cost(bands);
       }
     }

@@ -201,14 +201,16 @@ nlohmann::json stiction_json(const StictionQuantification& q) {
 
 StictionQuantification fit_stiction(const IdentificationResult& r, const FitContext& ctx) {
   if (ctx.stiction) return *ctx.stiction;
-  if (!ctx.op) return quantify_stiction(r.model);
+  StictionQuantificationOptions opt;
+  opt.threads = ctx.threads;
+  if (!ctx.op) return quantify_stiction(r.model, {}, opt);
   const std::size_t end = std::min(ctx.op->size(), r.estimation_end);
   const auto cut = [end](const std::vector<double>& v) {
     return std::vector<double>(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(end));
   };
   if (ctx.pv && ctx.pv->size() == ctx.op->size())
-    return quantify_stiction(r.model, cut(*ctx.op), cut(*ctx.pv));
-  return quantify_stiction(r.model, cut(*ctx.op));
+    return quantify_stiction(r.model, cut(*ctx.op), cut(*ctx.pv), opt);
+  return quantify_stiction(r.model, cut(*ctx.op), opt);
 }
 
 std::string format_summary(const IdentificationResult& r, const FitContext& ctx) {

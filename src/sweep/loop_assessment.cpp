@@ -26,13 +26,15 @@ double param(const std::vector<NamedValue>& p, const char* name) {
 // Stenman (d: band, jump d), deadband (d, no jump); a Preisach valve through He's figures fitted
 // to its response on the data's own OP (stiction_quantification.hpp).
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
-                           const std::vector<double>& pv, const OpRange& range) {
+                           const std::vector<double>& pv, const OpRange& range, int threads) {
   const double width = std::max(range.hi - range.lo, 1e-12);
   FrictionSize a;
   if (fit.preisach) {
+    StictionQuantificationOptions opt;
+    opt.threads = threads;
     const StictionQuantification q = pv.size() == op.size()
-                                         ? quantify_stiction(*fit.preisach, op, pv)
-                                         : quantify_stiction(*fit.preisach, op);
+                                         ? quantify_stiction(*fit.preisach, op, pv, opt)
+                                         : quantify_stiction(*fit.preisach, op, opt);
     if (q.valid && q.stiction) {
       a.band_percent = q.overall.fs_percent * 100.0 / width;
       a.jump_percent = q.overall.jump_percent * 100.0 / width;
@@ -66,15 +68,15 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
 }
 
 FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
-                           const std::vector<double>& pv, const OpRange& range) {
+                           const std::vector<double>& pv, const OpRange& range, int threads) {
   const ValveTravel& t = d.valve_travel;  // measured position: its figures, or no friction
   if (t.decided && t.verdict == "no-valve-problem") return {};
   if (t.decided && std::isfinite(t.fs_percent)) return {t.fs_percent, t.jump_percent};
-  FrictionSize a = friction_size(d.last().fit, op, pv, range);
+  FrictionSize a = friction_size(d.last().fit, op, pv, range, threads);
   if (std::isnan(a.band_percent) && d.whole_record.confirmed) {
     ModelFit whole;  // the friction figures of the whole-record memory fit
     whole.effects = d.whole_record.memory_effects;
-    a = friction_size(whole, op, pv, range);
+    a = friction_size(whole, op, pv, range, threads);
   }
   if (std::isnan(a.band_percent) && verdict(d) == "stiction" && d.limit_cycle.stick_slip)
     a.band_percent = 100.0 * d.limit_cycle.apparent_band / std::max(range.hi - range.lo, 1e-12);
@@ -207,7 +209,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
     a.first_missing = dg.steps.front().findings.front().effect;
   }
-  const FrictionSize fr = friction_size(dg, x.op, x.pv, opt.range);
+  const FrictionSize fr = friction_size(dg, x.op, x.pv, opt.range, opt.diagnose.fit.threads);
   a.stiction_percent = fr.band_percent;
   a.slip_jump_percent = fr.jump_percent;
   a.reason = dg.conclusion;

@@ -297,6 +297,38 @@ TEST_CASE("paper Example 1 with the default orders: each candidate's own poles f
 #endif
 }
 
+// The refinement's grid, polish and region grids run on several threads, each worker with a fit
+// of its own; the figures must be those of one thread, and the remembered costs those computed.
+TEST_CASE("the refined figures do not depend on the threads or on remembered costs") {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 2, 3000);
+  FitOptions fo;
+  fo.na_max = fo.nb_max = 2;
+  fo.nk_max = 10;
+  const IdentificationResult r = identify(d.op, d.pv, fo);
+  StictionQuantificationOptions one, three, every;
+  one.threads = 1;
+  three.threads = 3;  // more workers than this machine's cores, and an odd split
+  every.threads = 2;
+  every.reuse_costs = false;
+  const auto a = quantify_stiction(r.model, d.op, d.pv, one);
+  REQUIRE(a.refined);
+  CHECK(within(a.overall.fs_percent, 8.4));
+  CHECK(within(a.overall.fd_percent, 3.5243));
+  for (const auto& b : {quantify_stiction(r.model, d.op, d.pv, three),
+                        quantify_stiction(r.model, d.op, d.pv, every)}) {
+    CHECK(b.overall.fs_percent == a.overall.fs_percent);
+    CHECK(b.overall.fd_percent == a.overall.fd_percent);
+    CHECK(b.overall.fit_percent == a.overall.fit_percent);
+    REQUIRE(b.regions.size() == a.regions.size());
+    for (std::size_t i = 0; i < a.regions.size(); ++i) {
+      CHECK(b.regions[i].valid == a.regions[i].valid);
+      if (!a.regions[i].valid) continue;
+      CHECK(b.regions[i].figures.fs_percent == a.regions[i].figures.fs_percent);
+      CHECK(b.regions[i].figures.fd_percent == a.regions[i].figures.fd_percent);
+    }
+  }
+}
+
 TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more") {
   // PositionDependentStiction: fs 8, fd 3 below 40 % of travel, fs 3, fd 1 above 60 %
   // (interpolated between), in the fast loop with the OP held low, then high, then low.
