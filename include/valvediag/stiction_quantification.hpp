@@ -76,7 +76,7 @@ struct StictionQuantificationOptions {
   bool refine_on_data = true;
   double refine_window_steps = 3.0;
   int refine_passes = 2;  // re-estimations of the linear part's poles and delay
-  int refine_starts = 4;  // separate valleys of the coarse search that are polished
+  int refine_starts = 8;  // separate valleys of the coarse search that are polished
   // Score each point of the coarse search with poles of its own (the equation error's for its
   // valve) and polish from them; false: with the poles fitted to the Preisach valve's position.
   bool refine_own_linear = true;
