@@ -1,14 +1,13 @@
 #include "valvediag/identification.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <mutex>
 #include <stdexcept>
-#include <thread>
 
+#include "valvediag/parallel_for.hpp"
 #include "valvediag/relay_design.hpp"
 
 namespace valvediag {
@@ -633,73 +632,57 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
   // Work per L, largest first (they cost most), shared out over the cores.
   std::vector<int> Ls;
   for (int L = opt.L_max; L >= opt.L_min; --L) Ls.push_back(L);
-  unsigned nthreads = opt.threads > 0 ? static_cast<unsigned>(opt.threads)
-                                      : std::max(1u, std::thread::hardware_concurrency());
-  nthreads = std::min<unsigned>(nthreads, static_cast<unsigned>(Ls.size()));
-  std::atomic<std::size_t> next{0};
+  const unsigned nthreads = worker_count(opt.threads, Ls.size());
   std::mutex mtx;
   IdentificationResult res;
   Candidate best;
   best.info.fitness_percent = kNaN;
   double best_score = -std::numeric_limits<double>::infinity();
-  std::exception_ptr error;
 
-  auto worker = [&] {
-    try {
-      for (std::size_t idx; (idx = next.fetch_add(1)) < Ls.size();) {
-        const int L = Ls[idx];
-        const RelayDesign design(grid_for(u, opt, L), u, y, {0}, dopt);
-        std::vector<ConfigurationResult> local;
-        Candidate local_best;
-        double local_score = -std::numeric_limits<double>::infinity();
-        std::vector<int> warm;
-        const int nkmax = identity ? 0 : opt.nk_max, nkmin = identity ? 0 : opt.nk_min;
-        const int namax = identity ? 0 : opt.na_max, namin = identity ? 0 : opt.na_min;
-        const int nbmax = identity ? 1 : opt.nb_max, nbmin = identity ? 1 : opt.nb_min;
-        for (int nk = nkmin; nk <= nkmax; ++nk) {
-          for (int na = namin; na <= namax; ++na) {
-            Eigen::VectorXd prev_b;
-            for (int nb = 1; nb <= nbmax; ++nb) {
-              // Larger nb starts from the smaller one's b with a zero appended.
-              Eigen::VectorXd b0;
-              const Eigen::VectorXd* bs = nullptr;
-              if (prev_b.size() > 0) {
-                b0 = Eigen::VectorXd::Zero(nb);
-                b0.head(prev_b.size()) = prev_b;
-                bs = &b0;
-              }
-              Candidate c =
-                  fit_on_design(design, sums, u, y, sp, Structure{na, nb, nk, L}, opt, warm, bs);
-              prev_b = Eigen::Map<const Eigen::VectorXd>(
-                  c.model.b.data(), static_cast<Eigen::Index>(c.model.b.size()));
-              if (nb < nbmin) continue;
-              const double sc = score(c.info, opt);
-              if (opt.keep_all_configurations) local.push_back(c.info);
-              if (sc > local_score) {
-                local_score = sc;
-                local_best = std::move(c);
-              }
-            }
+  parallel_for(Ls.size(), nthreads, [&](unsigned, std::size_t idx) {
+    const int L = Ls[idx];
+    const RelayDesign design(grid_for(u, opt, L), u, y, {0}, dopt);
+    std::vector<ConfigurationResult> local;
+    Candidate local_best;
+    double local_score = -std::numeric_limits<double>::infinity();
+    std::vector<int> warm;
+    const int nkmax = identity ? 0 : opt.nk_max, nkmin = identity ? 0 : opt.nk_min;
+    const int namax = identity ? 0 : opt.na_max, namin = identity ? 0 : opt.na_min;
+    const int nbmax = identity ? 1 : opt.nb_max, nbmin = identity ? 1 : opt.nb_min;
+    for (int nk = nkmin; nk <= nkmax; ++nk) {
+      for (int na = namin; na <= namax; ++na) {
+        Eigen::VectorXd prev_b;
+        for (int nb = 1; nb <= nbmax; ++nb) {
+          // Larger nb starts from the smaller one's b with a zero appended.
+          Eigen::VectorXd b0;
+          const Eigen::VectorXd* bs = nullptr;
+          if (prev_b.size() > 0) {
+            b0 = Eigen::VectorXd::Zero(nb);
+            b0.head(prev_b.size()) = prev_b;
+            bs = &b0;
+          }
+          Candidate c =
+              fit_on_design(design, sums, u, y, sp, Structure{na, nb, nk, L}, opt, warm, bs);
+          prev_b = Eigen::Map<const Eigen::VectorXd>(c.model.b.data(),
+                                                     static_cast<Eigen::Index>(c.model.b.size()));
+          if (nb < nbmin) continue;
+          const double sc = score(c.info, opt);
+          if (opt.keep_all_configurations) local.push_back(c.info);
+          if (sc > local_score) {
+            local_score = sc;
+            local_best = std::move(c);
           }
         }
-        std::lock_guard<std::mutex> lock(mtx);
-        res.configurations.insert(res.configurations.end(), local.begin(), local.end());
-        for (const auto& r : local) res.total_iterations += r.iterations;
-        if (local_score > best_score) {
-          best_score = local_score;
-          best = std::move(local_best);
-        }
       }
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(mtx);
-      if (!error) error = std::current_exception();
     }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned i = 1; i < nthreads; ++i) pool.emplace_back(worker);
-  worker();
-  for (auto& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
+    std::lock_guard<std::mutex> lock(mtx);
+    res.configurations.insert(res.configurations.end(), local.begin(), local.end());
+    for (const auto& r : local) res.total_iterations += r.iterations;
+    if (local_score > best_score) {
+      best_score = local_score;
+      best = std::move(local_best);
+    }
+  });
   std::sort(res.configurations.begin(), res.configurations.end(), [](const auto& a, const auto& b) {
     const auto& x = a.structure;
     const auto& y2 = b.structure;
@@ -741,29 +724,16 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
     const PreisachGrid g = best.model.grid;
     const auto histories = initial_histories(g, u[0]);
     std::vector<Candidate> found(histories.size());
-    std::atomic<std::size_t> next_h{0};
     const Eigen::VectorXd b0 = Eigen::Map<const Eigen::VectorXd>(
         best.model.b.data(), static_cast<Eigen::Index>(best.model.b.size()));
     Structure s0 = best.info.structure;
     if (identity) s0 = Structure{0, 1, 0, s0.L};
     // Candidates are independent: share them out over the cores like the grid.
-    auto try_histories = [&] {
-      try {
-        for (std::size_t k; (k = next_h.fetch_add(1)) < histories.size();) {
-          const RelayDesign design(g, u, y, histories[k], dopt);
-          std::vector<int> warm;
-          found[k] = fit_on_design(design, sums, u, y, sp, s0, opt, warm, identity ? nullptr : &b0);
-        }
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(mtx);
-        if (!error) error = std::current_exception();
-      }
-    };
-    std::vector<std::thread> hpool;
-    for (unsigned i = 1; i < std::max(1u, nthreads); ++i) hpool.emplace_back(try_histories);
-    try_histories();
-    for (auto& t : hpool) t.join();
-    if (error) std::rethrow_exception(error);
+    parallel_for(histories.size(), nthreads, [&](unsigned, std::size_t k) {
+      const RelayDesign design(g, u, y, histories[k], dopt);
+      std::vector<int> warm;
+      found[k] = fit_on_design(design, sums, u, y, sp, s0, opt, warm, identity ? nullptr : &b0);
+    });
     for (auto& c : found) {
       res.total_iterations += c.info.iterations;
       if (score(c.info, opt) > best_score + 1e-9) {

@@ -5,17 +5,16 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <exception>
 #include <limits>
 #include <mutex>
 #include <stdexcept>
-#include <thread>
 #include <unordered_map>
+
+#include "valvediag/parallel_for.hpp"
 
 namespace valvediag {
 namespace {
@@ -630,36 +629,6 @@ class HeDataFit {
   mutable std::vector<double> x_, f_;  // scratch
 };
 
-// Workers for `jobs` independent jobs: `threads` (0: all cores), at most one per job.
-unsigned workers_for(int threads, std::size_t jobs) {
-  const unsigned n = threads > 0 ? static_cast<unsigned>(threads)
-                                 : std::max(1u, std::thread::hardware_concurrency());
-  return static_cast<unsigned>(std::clamp<std::size_t>(jobs, 1, n));
-}
-
-// job(worker, i) for every i < n, on `workers` threads (worker < workers); each job's result
-// must not depend on which worker ran it. The first exception stops the others and is rethrown.
-template <class Job>
-void parallel_for(std::size_t n, unsigned workers, Job&& job) {
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr error;
-  std::mutex m;
-  auto work = [&](unsigned w) {
-    try {
-      for (std::size_t i; (i = next.fetch_add(1)) < n;) job(w, i);
-    } catch (...) {
-      const std::lock_guard<std::mutex> lock(m);
-      if (!error) error = std::current_exception();
-      next = n;
-    }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned w = 1; w < workers; ++w) pool.emplace_back(work, w);
-  work(0);
-  for (auto& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
-}
-
 // The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
 // b, c and the initial state by least squares inside. Returns the cost; fit keeps the best poles.
 double refine_poles(HeDataFit& fit, const std::vector<double>& x) {
@@ -966,7 +935,6 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // that part: on paper Example 1 with fit's default orders it put the true valley below one at
   // fd 1.0-1.5 (against 3.5) on seeds 1 and 11 of 16 and on the demo's record, and the polish
   // refined the wrong one.
-  // Both at the start delay.
   const bool own = opt.refine_own_linear && arx;
   auto poles_for = [&](const HeDataFit& fit, const std::vector<double>& x) {
     std::vector<double> a = own ? fit.ls_poles(x) : std::vector<double>{};
@@ -978,10 +946,9 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // The points on all cores, each worker with a fit of its own. Neighbouring points often slip
   // on the same samples (on long records, half of them): a position's cost, own poles included,
   // is computed once.
-  const unsigned workers = workers_for(opt.threads, pts.size());
+  const unsigned workers = worker_count(opt.threads, pts.size());
   std::vector<HeDataFit> fits(workers, fit);
-  std::vector<std::vector<double>> xs(
-      workers);  // a long record's position is not allocated per point
+  std::vector<std::vector<double>> xs(workers);  // positions: not allocated per point
   std::unordered_map<std::uint64_t, double> scored;
   std::mutex scored_mutex;
   parallel_for(pts.size(), workers, [&](unsigned w, std::size_t k) {
@@ -1016,7 +983,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // poles; the best in start order wins.
   std::vector<Point> polished(starts);
   std::vector<std::vector<double>> start_poles(starts.size());
-  const unsigned polishers = workers_for(opt.threads, starts.size());
+  const unsigned polishers = worker_count(opt.threads, starts.size());
   std::vector<HeDataFit> pfits(polishers, fit);
   parallel_for(starts.size(), polishers, [&](unsigned w, std::size_t i) {
     HeDataFit& f = pfits[w];
@@ -1074,7 +1041,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
               sets.push_back(bands);
               sets.back()[static_cast<std::size_t>(r)] = {fs, fd};
             }
-          const unsigned n = workers_for(opt.threads, sets.size());
+          const unsigned n = worker_count(opt.threads, sets.size());
           std::vector<HeDataFit> fits(n, fit);
           std::vector<double> costs(sets.size());
           parallel_for(sets.size(), n,

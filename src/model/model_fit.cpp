@@ -10,21 +10,16 @@
 #include <mutex>
 #include <optional>
 #include <stdexcept>
-#include <thread>
 
 #include "valvediag/autocorrelation.hpp"
 #include "valvediag/identification.hpp"
+#include "valvediag/parallel_for.hpp"
 
 namespace valvediag {
 
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-unsigned thread_count(int requested) {
-  return requested > 0 ? static_cast<unsigned>(requested)
-                       : std::max(1u, std::thread::hardware_concurrency());
-}
 
 std::size_t estimation_end(std::size_t N, const ModelFitOptions& opt) {
   if (opt.validation_start > 0) return std::min(opt.validation_start, N);
@@ -189,27 +184,22 @@ NloptRun run_nlopt(nlopt_algorithm alg, Search& s, std::vector<double>& z, int m
 }
 
 // Grid over the unit box evaluated on all cores; returns every point's cost (index order).
-std::vector<double> grid_search(Search& s, int points, unsigned threads) {
+std::vector<double> grid_search(Search& s, int points, int threads) {
   const std::size_t n = s.dim();
   std::size_t total = 1;
   for (std::size_t i = 0; i < n; ++i) total *= static_cast<std::size_t>(points);
   std::vector<double> costs(total);
-  std::atomic<std::size_t> next{0};
-  auto work = [&] {
-    std::vector<double> z(n);
-    for (std::size_t k; (k = next.fetch_add(1)) < total;) {
-      std::size_t r = k;
-      for (std::size_t i = 0; i < n; ++i) {
-        z[i] = static_cast<double>(r % static_cast<std::size_t>(points)) / (points - 1);
-        r /= static_cast<std::size_t>(points);
-      }
-      costs[k] = nlopt_cost(static_cast<unsigned>(n), z.data(), nullptr, &s);
+  const unsigned workers = worker_count(threads, total);
+  std::vector<std::vector<double>> zs(workers, std::vector<double>(n));
+  parallel_for(total, workers, [&](unsigned w, std::size_t k) {
+    std::vector<double>& z = zs[w];
+    std::size_t r = k;
+    for (std::size_t i = 0; i < n; ++i) {
+      z[i] = static_cast<double>(r % static_cast<std::size_t>(points)) / (points - 1);
+      r /= static_cast<std::size_t>(points);
     }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned i = 1; i < std::min<std::size_t>(threads, total); ++i) pool.emplace_back(work);
-  work();
-  for (auto& t : pool) t.join();
+    costs[k] = nlopt_cost(static_cast<unsigned>(n), z.data(), nullptr, &s);
+  });
   if (s.error) std::rethrow_exception(s.error);
   return costs;
 }
@@ -256,13 +246,12 @@ nlopt_result search_space(Search& s, const ModelFitOptions& opt) {
   const int dim = static_cast<int>(s.dim());
   const int n_global = opt.global_evaluations > 0 ? opt.global_evaluations : 100 * dim;
   const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations : 60 * dim;
-  const unsigned threads = thread_count(opt.threads);
   int points = opt.grid_points;
   if (points == 0) points = dim == 1 ? 41 : dim == 2 ? 21 : dim == 3 ? 9 : 6;
   std::vector<std::vector<double>> starts;
   double step = 0.05;
   if (opt.global == GlobalSearch::Grid && std::pow(points, dim) <= 5000) {
-    const auto costs = grid_search(s, points, threads);
+    const auto costs = grid_search(s, points, opt.threads);
     starts = grid_starts(costs, s.dim(), points, std::max(1, opt.polish_starts));
     step = 0.5 / (points - 1);
   } else {
@@ -273,27 +262,12 @@ nlopt_result search_space(Search& s, const ModelFitOptions& opt) {
   // Independent polishes, one per start, on the cores.
   std::vector<nlopt_result> results(starts.size(), NLOPT_SUCCESS);
   std::vector<double> ends(starts.size(), std::numeric_limits<double>::infinity());
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr error;
-  std::mutex emtx;
-  auto work = [&] {
-    try {
-      for (std::size_t k; (k = next.fetch_add(1)) < starts.size();) {
+  parallel_for(
+      starts.size(), worker_count(opt.threads, starts.size()), [&](unsigned, std::size_t k) {
         std::vector<double> zk = starts[k];
         results[k] =
             run_nlopt(NLOPT_LN_NELDERMEAD, s, zk, n_local, opt.local_xtol, &ends[k], step).result;
-      }
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(emtx);
-      if (!error) error = std::current_exception();
-    }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned i = 1; i < std::min<std::size_t>(threads, starts.size()); ++i)
-    pool.emplace_back(work);
-  work();
-  for (auto& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
+      });
   const std::size_t winner =
       static_cast<std::size_t>(std::min_element(ends.begin(), ends.end()) - ends.begin());
   return results[winner];
@@ -818,27 +792,10 @@ std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector
                                  double Ts, const std::vector<ModelSpec>& specs,
                                  const ModelFitOptions& opt) {
   std::vector<ModelFit> out(specs.size());
-  const unsigned threads = std::min<unsigned>(
-      thread_count(opt.threads), static_cast<unsigned>(std::max<std::size_t>(1, specs.size())));
   ModelFitOptions one = opt;
   one.threads = 1;  // the parallelism is across the specs
-  std::atomic<std::size_t> next{0};
-  std::mutex mtx;
-  std::exception_ptr error;
-  auto work = [&] {
-    try {
-      for (std::size_t k; (k = next.fetch_add(1)) < specs.size();)
-        out[k] = fit_model(u, y, Ts, specs[k], one);
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(mtx);
-      if (!error) error = std::current_exception();
-    }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned i = 1; i < threads; ++i) pool.emplace_back(work);
-  work();
-  for (auto& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
+  parallel_for(specs.size(), worker_count(opt.threads, specs.size()),
+               [&](unsigned, std::size_t k) { out[k] = fit_model(u, y, Ts, specs[k], one); });
   return out;
 }
 
