@@ -10,10 +10,12 @@
 #include <cstdint>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <stdexcept>
 #include <unordered_map>
 
+#include "valvediag/autocorrelation.hpp"
 #include "valvediag/parallel_for.hpp"
 
 namespace valvediag {
@@ -285,6 +287,14 @@ std::string pct(double v, int prec = 1) {
   return buf;
 }
 
+// "; the data fit fs a-b %, fd c-d % within 95 % (profile likelihood)", or "" without an interval.
+std::string interval_clause(const StictionInterval& iv) {
+  if (!iv.valid) return "";
+  return "; the data fit fs " + pct(iv.fs_lo) + "-" + pct(iv.fs_hi) + " %, fd " + pct(iv.fd_lo) +
+         "-" + pct(iv.fd_hi) + " % within " + pct(100 * std::erf(std::sqrt(iv.chi2 / 2)), 0) +
+         " % (profile likelihood" + (iv.capped ? ", at least that wide" : "") + ")";
+}
+
 // The summary of a valid quantification: "stiction: fs .. % of travel (...) over OP lo-hi %", or
 // that no stiction is resolved. `span`: "" when OP is in %, else " of the OP span lo:hi"
 // (in_percent_of_span), said after the figures' range in place of " %".
@@ -298,7 +308,8 @@ std::string stiction_sentence(const StictionQuantification& q, const std::string
          (span.empty() ? " %" : span) +
          (q.jump_identified || q.refined
               ? ""
-              : "; the data's sweeps are too short to split the band into fs and fd");
+              : "; the data's sweeps are too short to split the band into fs and fd") +
+         interval_clause(q.interval);
 }
 
 // He's bands (fs, fd) of one OP region.
@@ -439,7 +450,16 @@ class HeDataFit {
     return costs_[key] = cost(x_);
   }
   // Residual sum of squares of the simulated output for the valve position x.
-  double cost(const std::vector<double>& x) const {
+  double cost(const std::vector<double>& x) const { return solve(x, nullptr); }
+  // The residual itself, over the scored rows.
+  std::vector<double> residuals(const std::vector<double>& x) const {
+    std::vector<double> r;
+    solve(x, &r);
+    return r;
+  }
+
+ private:
+  double solve(const std::vector<double>& x, std::vector<double>* residual) const {
     filter(x);
     // Regressors: B's taps (x through 1/A, delayed), then the fixed ones, then y.
     Columns taps;
@@ -469,10 +489,20 @@ class HeDataFit {
     Gs.diagonal().array() += 1e-10;
     const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxColumns, 1> rs = sc.asDiagonal() * r;
     const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxColumns, 1> th = Gs.ldlt().solve(rs);
+    if (residual) {
+      const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxColumns, 1> theta = sc.cwiseProduct(th);
+      residual->resize(u_.size() - t0_);
+      for (std::size_t t = t0_; t < u_.size(); ++t) {
+        double e = y_[t];
+        for (int k = 0; k < p; ++k) {
+          const Column& c = all.c[static_cast<std::size_t>(k)];
+          e -= theta(k) * c.v[t - c.lag];
+        }
+        (*residual)[t - t0_] = e;
+      }
+    }
     return std::max(0.0, yy - th.dot(rs));
   }
-
- private:
   static constexpr int kMaxColumns = 10;
   // Regressor columns as lagged series: column k holds v[t - lag] in row t.
   struct Column {
@@ -665,6 +695,117 @@ double refine_poles(HeDataFit& fit, const std::vector<double>& x) {
   }
   fit.set_poles(a);
   return best;
+}
+
+// The profile-likelihood interval of (fs, fd) around the best (bfs, bfd) of cost `best`
+// (StictionInterval). `fit` holds the best's linear part; `own_delay` >= 0: candidates are also
+// scored with their own equation-error poles at that delay (`fallback_poles` where those are
+// unstable), whichever cost is lower (`own_costs`: such costs already known, by position
+// fingerprint). The lattice (fs, fd) = (bfs + i h, bfd + j h)
+// starts as the box of half-width `half` around the best; a side that holds a candidate within the
+// threshold is moved out by `half`, until 0 <= fd <= fs <= width or the point budget. The
+// search's other polished valleys (`valleys`) count too: within the threshold they fit as well,
+// however far from the best (on real loops the cost is nearly flat across quite different bands).
+struct Candidate {
+  double cost, fs, fd;
+};
+StictionInterval profile_interval(const HeDataFit& fit, int own_delay,
+                                  const std::vector<double>& fallback_poles,
+                                  const std::unordered_map<std::uint64_t, double>& own_costs,
+                                  const std::vector<Candidate>& valleys,
+                                  const StictionQuantificationOptions& opt, double bfs, double bfd,
+                                  double best, double h, double half, double width) {
+  StictionInterval iv;
+  iv.chi2 = opt.interval_chi2;
+  iv.step_percent = h;
+  iv.effective_samples = effective_sample_size(fit.residuals(fit.valve(bfs, bfd)));
+  iv.cost_ratio = std::exp(iv.chi2 / iv.effective_samples);
+  const double eps = 1e-9;
+  const int m = std::max(1, static_cast<int>(std::lround(half / h)));
+  const int i_min = -static_cast<int>(std::floor((bfs + eps) / h));
+  const int i_max = static_cast<int>(std::floor((width - bfs + eps) / h));
+  const int j_min = -static_cast<int>(std::floor((bfd + eps) / h));
+  auto fs_of = [&](int i) { return bfs + i * h; };
+  auto fd_of = [&](int j) { return bfd + j * h; };
+  auto valid = [&](int i, int j) {
+    return i >= i_min && i <= i_max && j >= j_min && fd_of(j) <= fs_of(i) + eps;
+  };
+  std::map<std::pair<int, int>, double> cost;
+  int ilo = std::max(-m, i_min), ihi = std::min(m, i_max), jlo = std::max(-m, j_min), jhi = m;
+  for (;;) {
+    std::vector<std::pair<int, int>> todo;
+    for (int i = ilo; i <= ihi; ++i)
+      for (int j = jlo; j <= jhi; ++j)
+        if (valid(i, j) && !cost.contains({i, j})) todo.push_back({i, j});
+    if (cost.size() + todo.size() > opt.interval_max_points && !cost.empty()) {
+      iv.capped = true;
+      break;
+    }
+    const unsigned workers = worker_count(opt.threads, todo.size());
+    std::vector<HeDataFit> same(workers, fit);
+    std::vector<HeDataFit> own(own_delay >= 0 ? workers : 0, fit);
+    for (HeDataFit& f : own) f.set_delay(own_delay);
+    std::vector<std::vector<double>> xs(workers);
+    std::vector<double> c(todo.size());
+    parallel_for(todo.size(), workers, [&](unsigned w, std::size_t k) {
+      const double fs = fs_of(todo[k].first), fd = fd_of(todo[k].second);
+      c[k] = same[w].cost(fs, fd);
+      if (own.empty()) return;
+      HeDataFit& f = own[w];
+      const std::uint64_t key = f.valve(fs, fd, xs[w]);
+      const auto known = opt.reuse_costs ? own_costs.find(key) : own_costs.end();
+      if (known != own_costs.end()) {
+        c[k] = std::min(c[k], known->second);
+        return;
+      }
+      const std::vector<double> a = f.ls_poles(xs[w]);
+      f.set_poles(a.empty() ? fallback_poles : a);
+      c[k] = std::min(c[k], f.cost(xs[w]));
+    });
+    for (std::size_t k = 0; k < todo.size(); ++k) {
+      cost[todo[k]] = c[k];
+      best = std::min(best, c[k]);
+    }
+    const double limit = best * iv.cost_ratio;
+    auto inside_at = [&](bool row, int at) {
+      for (const auto& [ij, v] : cost)
+        if ((row ? ij.first : ij.second) == at && v <= limit) return true;
+      return false;
+    };
+    bool grow = false;
+    auto widen = [&](int& side, bool row, int step, int bound) {
+      if (side == bound || !inside_at(row, side)) return;
+      side = step < 0 ? std::max(side + step, bound) : std::min(side + step, bound);
+      grow = true;
+    };
+    widen(ilo, true, -m, i_min);
+    widen(ihi, true, m, i_max);
+    widen(jlo, false, -m, j_min);
+    // fd's side is bounded by fd <= fs at the box's largest fs.
+    widen(jhi, false, m, static_cast<int>(std::floor((fs_of(ihi) - bfd + eps) / h)));
+    if (!grow) break;
+  }
+  const double limit = best * iv.cost_ratio;
+  iv.fs_lo = iv.fs_hi = bfs;
+  iv.fd_lo = iv.fd_hi = bfd;
+  std::vector<Candidate> inside = valleys;
+  for (const auto& [ij, v] : cost) inside.push_back({v, fs_of(ij.first), fd_of(ij.second)});
+  for (const Candidate& c : inside) {
+    if (c.cost > limit) continue;
+    iv.fs_lo = std::min(iv.fs_lo, c.fs);
+    iv.fs_hi = std::max(iv.fs_hi, c.fs);
+    iv.fd_lo = std::min(iv.fd_lo, c.fd);
+    iv.fd_hi = std::max(iv.fd_hi, c.fd);
+  }
+  // Between lattice points the cost is not known (on simulated loops its valleys are narrower
+  // than a step): the ends are bracketed by the next points out.
+  iv.fs_lo = std::max(0.0, iv.fs_lo - h);
+  iv.fs_hi = std::min(width, iv.fs_hi + h);
+  iv.fd_lo = std::max(0.0, iv.fd_lo - h);
+  iv.fd_hi = std::min(iv.fs_hi, iv.fd_hi + h);
+  iv.points = cost.size();
+  iv.valid = true;
+  return iv;
 }
 
 }  // namespace
@@ -927,9 +1068,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // part by output error, then a finer grid) and the best wins.
   const double h = std::clamp((fs0 + fd0) / 40, 0.02, 0.1);
   const double W = opt.refine_window_steps * delta;
-  struct Point {
-    double cost, fs, fd;
-  };
+  using Point = Candidate;
   // The poles a candidate's valve position is scored with: the equation error's for that valve,
   // or the Preisach valve's. Scored with the Preisach valve's alone, the grid's ranking depends on
   // that part: on paper Example 1 with fit's default orders it put the true valley below one at
@@ -943,80 +1082,154 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   std::vector<Point> pts;
   for (double fs = std::max(0.0, fs0 - W); fs <= std::min(fs0 + W, width) + 1e-9; fs += h)
     for (double fd = 0.0; fd <= std::min(fs, fd0 + W) + 1e-9; fd += h) pts.push_back({0.0, fs, fd});
+  const std::size_t local_points = pts.size();
+  // And a coarse lattice over every band the visited range allows (0 <= fd <= fs <= width), about
+  // `global_points` of them: the probe's figures are only as good as the Preisach model, which
+  // measurement noise biases (fopdt, fs 5 fd 2, noise 1: the probe says fs 13.7, the window's
+  // best 10.1, and the truth fits the data better than either).
+  const double hg =
+      opt.global_starts > 0 && opt.global_points > 0
+          ? std::max(h, width / std::sqrt(2.0 * static_cast<double>(opt.global_points)))
+          : 0.0;
+  if (hg > 0)
+    for (double fs = hg; fs <= width + 1e-9; fs += hg)
+      for (double fd = 0.0; fd <= fs + 1e-9; fd += hg) pts.push_back({0.0, fs, fd});
   // The points on all cores, each worker with a fit of its own. Neighbouring points often slip
   // on the same samples (on long records, half of them): a position's cost, own poles included,
   // is computed once.
   const unsigned workers = worker_count(opt.threads, pts.size());
   std::vector<HeDataFit> fits(workers, fit);
   std::vector<std::vector<double>> xs(workers);  // positions: not allocated per point
+  // The coarse lattice's bands are also scored with the Preisach valve's poles, the lower cost
+  // kept: far from the probe the equation error's poles can be far off too (noise biases them).
+  std::vector<HeDataFit> held(own && hg > 0 ? workers : 0, fit);
   std::unordered_map<std::uint64_t, double> scored;
   std::mutex scored_mutex;
   parallel_for(pts.size(), workers, [&](unsigned w, std::size_t k) {
     HeDataFit& f = fits[w];
     std::vector<double>& x = xs[w];
-    const std::uint64_t key = f.valve(pts[k].fs, pts[k].fd, x);
+    Point& pt = pts[k];
+    const double held_cost = k >= local_points && !held.empty()
+                                 ? held[w].cost(pt.fs, pt.fd)
+                                 : std::numeric_limits<double>::infinity();
+    const std::uint64_t key = f.valve(pt.fs, pt.fd, x);
     if (opt.reuse_costs) {
       const std::lock_guard<std::mutex> lock(scored_mutex);
       const auto seen = scored.find(key);
       if (seen != scored.end()) {
-        pts[k].cost = seen->second;
+        pt.cost = std::min(held_cost, seen->second);
         return;
       }
     }
     if (own) f.set_poles(poles_for(f, x));
-    pts[k].cost = f.cost(x);
+    const double c = f.cost(x);
+    pt.cost = std::min(held_cost, c);
     if (opt.reuse_costs) {
       const std::lock_guard<std::mutex> lock(scored_mutex);
-      scored.emplace(key, pts[k].cost);
+      scored.emplace(key, c);
     }
   });
-  std::sort(pts.begin(), pts.end(), [](const Point& l, const Point& r) { return l.cost < r.cost; });
+  // The window's best separate valleys, then the coarse lattice's best ones apart from those.
+  auto by_cost = [](const Point& l, const Point& r) { return l.cost < r.cost; };
+  const auto local_end = pts.begin() + static_cast<std::ptrdiff_t>(local_points);
+  std::sort(pts.begin(), local_end, by_cost);
+  std::sort(local_end, pts.end(), by_cost);
   std::vector<Point> starts;
-  for (const Point& pt : pts) {
-    if (static_cast<int>(starts.size()) >= opt.refine_starts) break;
-    bool separate = true;
-    for (const Point& st : starts)
-      separate = separate && std::max(std::abs(st.fs - pt.fs), std::abs(st.fd - pt.fd)) > delta / 2;
-    if (separate) starts.push_back(pt);
-  }
-  // Each start polished by a worker with a fit of its own, from the start delay and its own
-  // poles; the best in start order wins.
-  std::vector<Point> polished(starts);
-  std::vector<std::vector<double>> start_poles(starts.size());
-  const unsigned polishers = worker_count(opt.threads, starts.size());
-  std::vector<HeDataFit> pfits(polishers, fit);
-  parallel_for(starts.size(), polishers, [&](unsigned w, std::size_t i) {
-    HeDataFit& f = pfits[w];
-    Point& cur = polished[i];
-    f.set_delay(nk_start);
-    start_poles[i] = poles_for(f, f.valve(cur.fs, cur.fd));
-    f.set_poles(start_poles[i]);
-    for (int pass = 0; pass < (arx ? opt.refine_passes : 1); ++pass) {
-      if (arx) refine_linear(f, f.valve(cur.fs, cur.fd));
-      cur.cost = f.cost(cur.fs, cur.fd);
-      const Point c0 = cur;
-      const double hh = h / 4;
-      for (double fs = std::max(0.0, c0.fs - 4 * h); fs <= c0.fs + 4 * h + 1e-9; fs += hh)
-        for (double fd = std::max(0.0, c0.fd - 4 * h); fd <= std::min(fs, c0.fd + 4 * h) + 1e-9;
-             fd += hh) {
-          const double c = f.cost(fs, fd);
-          if (c < cur.cost) cur = {c, fs, fd};
-        }
+  auto take = [&](auto from, auto to, std::size_t count, double apart) {
+    const std::size_t limit = starts.size() + count;
+    for (auto pt = from; pt != to && starts.size() < limit; ++pt) {
+      bool separate = true;
+      for (const Point& st : starts)
+        separate = separate && std::max(std::abs(st.fs - pt->fs), std::abs(st.fd - pt->fd)) > apart;
+      if (separate) starts.push_back(*pt);
     }
-  });
+  };
+  take(pts.begin(), local_end, static_cast<std::size_t>(std::max(0, opt.refine_starts)), delta / 2);
+  take(local_end, pts.end(), static_cast<std::size_t>(std::max(0, opt.global_starts)),
+       std::max(delta / 2, 2 * hg));
+  // Each start polished by a worker with a fit of its own, from `nk` and `poles` (empty: the
+  // start's own); the best in start order wins.
+  struct Polished {
+    std::vector<Point> points;
+    std::vector<std::vector<double>> poles;  // each start's
+    int delay;
+  };
+  auto polish = [&](const std::vector<Point>& from, int nk, const std::vector<double>& poles) {
+    Polished out{from, std::vector<std::vector<double>>(from.size()), nk};
+    const unsigned polishers = worker_count(opt.threads, from.size());
+    std::vector<HeDataFit> pfits(polishers, fit);
+    parallel_for(from.size(), polishers, [&](unsigned w, std::size_t i) {
+      HeDataFit& f = pfits[w];
+      Point& cur = out.points[i];
+      f.set_delay(nk);
+      out.poles[i] = poles.empty() ? poles_for(f, f.valve(cur.fs, cur.fd)) : poles;
+      f.set_poles(out.poles[i]);
+      for (int pass = 0; pass < (arx ? opt.refine_passes : 1); ++pass) {
+        if (arx) refine_linear(f, f.valve(cur.fs, cur.fd));
+        cur.cost = f.cost(cur.fs, cur.fd);
+        const Point c0 = cur;
+        const double hh = h / 4;
+        for (double fs = std::max(0.0, c0.fs - 4 * h); fs <= c0.fs + 4 * h + 1e-9; fs += hh)
+          for (double fd = std::max(0.0, c0.fd - 4 * h); fd <= std::min(fs, c0.fd + 4 * h) + 1e-9;
+               fd += hh) {
+            const double c = f.cost(fs, fd);
+            if (c < cur.cost) cur = {c, fs, fd};
+          }
+      }
+    });
+    return out;
+  };
   Point best{std::numeric_limits<double>::infinity(), fs0, fd0};
   std::vector<double> best_poles = a_start;
-  for (std::size_t i = 0; i < starts.size(); ++i)
-    if (polished[i].cost < best.cost) {
-      best = polished[i];
-      best_poles = start_poles[i];
+  int best_delay = nk_start;
+  std::vector<Point> polished;  // every polished valley
+  auto keep_best = [&](const Polished& p) {
+    for (std::size_t i = 0; i < p.points.size(); ++i) {
+      polished.push_back(p.points[i]);
+      if (p.points[i].cost < best.cost) {
+        best = p.points[i];
+        best_poles = p.poles[i];
+        best_delay = p.delay;
+      }
     }
+  };
+  keep_best(polish(starts, nk_start, {}));
+  // The coarse lattice again, scored with the best's linear part: where the probe and the
+  // equation error's poles were both off, the first round's best has poles near the truth's.
+  for (int round = 1; round < opt.global_rounds && hg > 0; ++round) {
+    HeDataFit winner = fit;
+    winner.set_delay(best_delay);
+    winner.set_poles(best_poles);
+    if (arx) refine_linear(winner, winner.valve(best.fs, best.fd));
+    std::vector<Point> lattice(local_end, pts.end());
+    const unsigned n = worker_count(opt.threads, lattice.size());
+    std::vector<HeDataFit> wfits(n, winner);
+    parallel_for(lattice.size(), n, [&](unsigned w, std::size_t k) {
+      lattice[k].cost = wfits[w].cost(lattice[k].fs, lattice[k].fd);
+    });
+    std::sort(lattice.begin(), lattice.end(), by_cost);
+    starts = polished;
+    const std::size_t before = starts.size();
+    take(lattice.begin(), lattice.end(), static_cast<std::size_t>(std::max(0, opt.global_starts)),
+         std::max(delta / 2, 2 * hg));
+    if (starts.size() == before) break;
+    const double was = best.cost;
+    keep_best(polish(
+        std::vector<Point>(starts.begin() + static_cast<std::ptrdiff_t>(before), starts.end()),
+        winner.delay(), winner.poles()));
+    if (!(best.cost < was)) break;
+  }
   const double bfs = best.fs, bfd = best.fd, bcost = best.cost;
   // The linear part of the winner, from where its polish started (the loop above leaves the last
   // start's).
   fit.set_poles(best_poles);
-  fit.set_delay(nk_start);
+  fit.set_delay(best_delay);
   if (arx) refine_linear(fit, fit.valve(bfs, bfd));
+  if (opt.interval) {
+    q.interval =
+        profile_interval(fit, own ? nk_start : -1, a_start, scored, polished, opt, bfs, bfd,
+                         std::min(bcost, fit.cost(bfs, bfd)), h, std::max(delta / 2, 2 * h), width);
+  }
 
   // Per region: He's bands where the valve sticks in that region (PositionDependentStiction),
   // each region's band searched in turn around the overall figures, the others held, with the
@@ -1093,6 +1306,9 @@ StictionQuantification in_percent_of_span(StictionQuantification q, const OpRang
   }
   q.resolution_percent *= k;
   q.scale /= k;
+  for (double* v : {&q.interval.fs_lo, &q.interval.fs_hi, &q.interval.fd_lo, &q.interval.fd_hi,
+                    &q.interval.step_percent})
+    *v *= k;
   if (q.valid) q.summary = stiction_sentence(q, " of the OP span " + pct(op_lo) + ":" + pct(op_hi));
   return q;
 }

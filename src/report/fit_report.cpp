@@ -146,6 +146,13 @@ std::string format_stiction(const StictionQuantification& q) {
     if (!q.jump_identified)
       o << "           the data's sweeps are shorter than 2 fs: the split of the band into fs and "
            "fd is not identified\n";
+    const StictionInterval& iv = q.interval;
+    if (iv.valid)
+      o << "           the data fit fs " << num(iv.fs_lo, 2) << "-" << num(iv.fs_hi, 2) << " %, fd "
+        << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within "
+        << num(100 * std::erf(std::sqrt(iv.chi2 / 2)), 0) << " % (profile likelihood, "
+        << num(iv.effective_samples, 0) << " effective samples, lattice step "
+        << num(iv.step_percent, 2) << " %" << (iv.capped ? "; at least that wide" : "") << ")\n";
   } else {
     o << "none resolved (band below the grid step " << num(q.resolution_percent, 2) << " %)\n";
   }
@@ -164,6 +171,20 @@ std::string format_stiction(const StictionQuantification& q) {
     o << "\n";
   }
   return o.str();
+}
+
+nlohmann::json interval_json(const StictionInterval& iv) {
+  if (!iv.valid) return nullptr;
+  return {{"fs_lo_percent", iv.fs_lo},
+          {"fs_hi_percent", iv.fs_hi},
+          {"fd_lo_percent", iv.fd_lo},
+          {"fd_hi_percent", iv.fd_hi},
+          {"level", std::erf(std::sqrt(iv.chi2 / 2))},
+          {"effective_samples", iv.effective_samples},
+          {"cost_ratio", iv.cost_ratio},
+          {"step_percent", iv.step_percent},
+          {"points", iv.points},
+          {"capped", iv.capped}};
 }
 
 nlohmann::json stiction_json(const StictionQuantification& q) {
@@ -190,6 +211,7 @@ nlohmann::json stiction_json(const StictionQuantification& q) {
           {"valid", q.valid},
           {"jump_identified", q.jump_identified},
           {"resolution_percent", q.resolution_percent},
+          {"interval", interval_json(q.interval)},
           {"op_lo", q.op_lo},
           {"op_hi", q.op_hi},
           {"probe", q.data_given ? "data" : "grid"},

@@ -41,7 +41,7 @@ void write(const std::string& path, const std::string& text) {
 }
 
 // A small loop file: OP a slow triangle with stiction-like PV, enough for a small grid.
-std::string loop_csv(std::size_t n, bool constant_op = false) {
+std::string loop_csv(std::size_t n, bool constant_op = false, double band = 2.0) {
   std::ostringstream s;
   s << "t,op,pv\n";
   double x = 50, y = 0;
@@ -49,7 +49,7 @@ std::string loop_csv(std::size_t n, bool constant_op = false) {
     const double u = constant_op ? 50.0
                                  : 50 + 10 * std::sin(0.02 * static_cast<double>(k)) +
                                        3 * std::sin(0.13 * static_cast<double>(k));
-    if (std::abs(u - x) > 2.0) x = u;  // a valve that sticks 2 %
+    if (std::abs(u - x) > band) x = u;  // a valve that sticks `band` %
     y = 0.9 * y + 0.1 * (x - 50);
     s << k * 0.5 << "," << u << "," << y << "\n";
   }
@@ -152,6 +152,29 @@ TEST_CASE("fit writes the JSON keys and the series others rely on") {
                         "valid", "resolution_percent", "regions"})
     CHECK_MESSAGE(j["stiction"].contains(k), k);
   CHECK(j["stiction"]["regions"].size() == 3);
+  // A valve that sticks 6 % (He's fs 6, fd 0), on the full grid of L: its figures are refined on
+  // the data, with their profile-likelihood interval around them.
+  write(tmp("sticky.csv"), loop_csv(1200, false, 6.0));
+  auto st = run("fit " + tmp("sticky.csv") + " --na-max 1 --nb-max 2 --nk-max 1 --json " +
+                tmp("sticky.json"));
+  REQUIRE(st.status == 0);
+  std::ifstream sf(tmp("sticky.json"));
+  const auto sj = nlohmann::json::parse(sf)["stiction"];
+  REQUIRE(sj["stiction"].get<bool>());
+  CHECK(sj["fs_percent"].get<double>() == doctest::Approx(6.0).epsilon(0.05));
+  const auto& iv = sj["interval"];
+  REQUIRE(iv.is_object());
+  CHECK(iv["fs_lo_percent"].get<double>() <= sj["fs_percent"].get<double>());
+  CHECK(sj["fs_percent"].get<double>() <= iv["fs_hi_percent"].get<double>());
+  CHECK(iv["fd_lo_percent"].get<double>() <= sj["fd_percent"].get<double>());
+  CHECK(sj["fd_percent"].get<double>() <= iv["fd_hi_percent"].get<double>());
+  CHECK(iv["fs_lo_percent"].get<double>() <= 6.0);
+  CHECK(6.0 <= iv["fs_hi_percent"].get<double>());
+  CHECK(iv["level"].get<double>() == doctest::Approx(0.95).epsilon(1e-3));
+  CHECK(iv["effective_samples"].get<double>() >= 1.0);
+  CHECK(st.out.find("the data fit fs") != std::string::npos);
+  // Without a resolved band there is nothing to bracket.
+  if (!j["stiction"]["stiction"].get<bool>()) CHECK(j["stiction"]["interval"].is_null());
   REQUIRE(!j["mu"].empty());
   for (const auto& w : j["mu"]) {
     CHECK(w["i"].get<int>() <= w["j"].get<int>());

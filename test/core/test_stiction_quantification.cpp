@@ -246,8 +246,10 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
   std::printf(
       "\nstiction quantification (He truth vs estimate, %% of travel): Preisach probe, "
       "then refined on the data\n");
-  std::printf("%-4s %-5s %5s %3s %5s | %5s %5s | %5s %5s | %5s %5s | %5s %s\n", "case", "loop",
-              "noise", "L", "delta", "fs", "fd", "P fs^", "P fd^", "fs^", "fd^", "fit", "ok");
+  int covered = 0;
+  std::printf("%-4s %-5s %5s %3s %5s | %5s %5s | %5s %5s | %5s %5s | %5s %-4s | %-11s %-11s %s\n",
+              "case", "loop", "noise", "L", "delta", "fs", "fd", "P fs^", "P fd^", "fs^", "fd^",
+              "fit", "ok", "fs 95 %", "fd 95 %", "N_eff");
   std::size_t run = 0;
   for (std::size_t i = 0; i < cases.size(); i += stride, ++run) {
     const Case& c = cases[i];
@@ -259,27 +261,74 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
         q.stiction && within(q.overall.fs_percent, c.fs) && within(q.overall.fd_percent, c.fd);
     ok_count += ok;
     preisach_ok += within(q.preisach.fs_percent, c.fs) && within(q.preisach.fd_percent, c.fd);
-    std::printf("%-4zu %-5s %5.2f %3d %5.2f | %5.2f %5.2f | %5.2f %5.2f | %5.2f %5.2f | %5.1f %s\n",
-                i + 1, c.loop.c_str(), c.noise, r.model.grid.L, q.resolution_percent, c.fs, c.fd,
-                q.preisach.fs_percent, q.preisach.fd_percent, q.overall.fs_percent,
-                q.overall.fd_percent, q.overall.fit_percent, ok ? "ok" : "MISS");
+    const StictionInterval& iv = q.interval;
+    REQUIRE(iv.valid);
+    CHECK(iv.fs_lo <= q.overall.fs_percent);
+    CHECK(q.overall.fs_percent <= iv.fs_hi);
+    CHECK(iv.fd_lo <= q.overall.fd_percent);
+    CHECK(q.overall.fd_percent <= iv.fd_hi);
+    CHECK(iv.fd_hi <= iv.fs_hi);
+    const bool inside =
+        iv.fs_lo <= c.fs && c.fs <= iv.fs_hi && iv.fd_lo <= c.fd && c.fd <= iv.fd_hi;
+    covered += inside;
+    std::printf(
+        "%-4zu %-5s %5.2f %3d %5.2f | %5.2f %5.2f | %5.2f %5.2f | %5.2f %5.2f | %5.1f %-4s | "
+        "%5.2f-%-5.2f %5.2f-%-5.2f %5.0f%s\n",
+        i + 1, c.loop.c_str(), c.noise, r.model.grid.L, q.resolution_percent, c.fs, c.fd,
+        q.preisach.fs_percent, q.preisach.fd_percent, q.overall.fs_percent, q.overall.fd_percent,
+        q.overall.fit_percent, ok ? "ok" : "MISS", iv.fs_lo, iv.fs_hi, iv.fd_lo, iv.fd_hi,
+        iv.effective_samples, inside ? "" : " truth outside");
   }
   const double elapsed =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("%d of %zu within 20 %% or 0.5 %% of travel (Preisach probe alone: %d) (%.1f s)\n",
-              ok_count, run, preisach_ok, elapsed);
+  std::printf(
+      "%d of %zu within 20 %% or 0.5 %% of travel (Preisach probe alone: %d); the truth inside "
+      "the 95 %% interval on %d (%.1f s)\n",
+      ok_count, run, preisach_ok, covered, elapsed);
   // Measured (Release): 19 of 19 refined; the Preisach probe alone 10 of 19 (5 of the first 12):
   // its band is known to a grid step only and a fitted lattice's weights shorten it, even fitted
   // to the noise-free valve position. The goal is 90 %; the floor is the measurement.
   CHECK(ok_count >= static_cast<int>(run));  // 19 of 19 in Release
+  // Measured: 19 of 19. On these loops the cost's valleys are narrower than the lattice step,
+  // so the interval is the step's bracket around the estimate, and the truth is inside it
+  // because the estimate is within a step of it.
+  CHECK(10 * covered >= 9 * static_cast<int>(run));
 }
+
+// The interval says how well the data fix the figures: the same loop with more measurement noise
+// (and so a flatter cost) must give a wider one, still holding the truth.
+#ifndef VALVEDIAG_SANITIZED  // three full quantifications; the interval's code runs in the others
+TEST_CASE("the stiction interval widens with the measurement noise") {
+  double previous = 0.0, first = 0.0;
+  for (double noise : {0.1, 1.0, 3.0}) {
+    CAPTURE(noise);
+    const Case c{"fopdt", 5.0, 2.0, noise, 8};
+    const LoopData d = run_scenario(case_loop(c), c.seed, 0);
+    const IdentificationResult r = identify(d.op, d.pv, case_fit_options(c.loop));
+    const auto q = quantify_stiction(r.model, d.op, d.pv);
+    REQUIRE(q.interval.valid);
+    const StictionInterval& iv = q.interval;
+    std::printf("noise %.1f: fs %.2f [%.2f, %.2f], fd %.2f [%.2f, %.2f], N_eff %.0f, %zu points\n",
+                noise, q.overall.fs_percent, iv.fs_lo, iv.fs_hi, q.overall.fd_percent, iv.fd_lo,
+                iv.fd_hi, iv.effective_samples, iv.points);
+    CHECK(iv.fs_lo <= c.fs);
+    CHECK(c.fs <= iv.fs_hi);
+    // Measured: 0.20, 0.20 (the lattice step's bracket: the valley is still a needle), 2.60.
+    CHECK(iv.fs_hi - iv.fs_lo >= previous);
+    if (noise > 2) CHECK(iv.fs_hi - iv.fs_lo > 5 * first);
+    if (first == 0) first = iv.fs_hi - iv.fs_lo;
+    previous = iv.fs_hi - iv.fs_lo;
+  }
+}
+#endif
 
 // Paper Example 1 as `fit` sees it by default: 3000 samples, the full grid of orders. The coarse
 // search decides which valleys are polished; scored with the linear part fitted to the Preisach
 // valve it can rank the true valley below ones at fd 1.1-1.4, scored with each candidate's own
 // poles the true one ranks among the first. Measured on seeds 1-40 with 4 valleys polished: own
 // poles 40 of 40 within 20 %; the Preisach valve's poles miss fd on seeds 24, 27 and 29 (and
-// were 1-2 % of travel low on fs on many others). With the default 8 both find seed 24's.
+// were 1-2 % of travel low on fs on many others). With the default 8 both find seed 24's, and so
+// does the coarse lattice over every band: the window's ranking is compared without it.
 TEST_CASE("paper Example 1 with the default orders: each candidate's own poles find the true fd") {
   const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 24, 3000);
   const IdentificationResult r = identify(d.op, d.pv, FitOptions{});
@@ -291,6 +340,7 @@ TEST_CASE("paper Example 1 with the default orders: each candidate's own poles f
 #ifndef VALVEDIAG_SANITIZED  // the same figures; the sanitizers only need one run
   StictionQuantificationOptions four;
   four.refine_starts = 4;
+  four.global_starts = 0;
   const auto q4 = quantify_stiction(r.model, d.op, d.pv, four);
   CHECK(q4.overall.fd_percent == doctest::Approx(3.5243).epsilon(0.05));
   // With the Preisach valve's poles for every candidate the split is missed (measured: fs 7.82,
@@ -324,6 +374,11 @@ TEST_CASE("the refined figures do not depend on the threads or on remembered cos
     CHECK(b.overall.fs_percent == a.overall.fs_percent);
     CHECK(b.overall.fd_percent == a.overall.fd_percent);
     CHECK(b.overall.fit_percent == a.overall.fit_percent);
+    CHECK(b.interval.fs_lo == a.interval.fs_lo);
+    CHECK(b.interval.fs_hi == a.interval.fs_hi);
+    CHECK(b.interval.fd_lo == a.interval.fd_lo);
+    CHECK(b.interval.fd_hi == a.interval.fd_hi);
+    CHECK(b.interval.points == a.interval.points);
     REQUIRE(b.regions.size() == a.regions.size());
     for (std::size_t i = 0; i < a.regions.size(); ++i) {
       CHECK(b.regions[i].valid == a.regions[i].valid);
@@ -365,4 +420,58 @@ TEST_CASE("an asymmetric valve in closed loop: the region table shows where it s
     CHECK(low.figures.band_percent > high.figures.band_percent);
     CHECK(low.figures.fs_percent > 5.0);
   }
+}
+
+// Measurement noise biases the Preisach model (equation error), and with it the probe's window:
+// at noise 1 the probe says fs 13.7 for a true 5. The coarse lattice over every band finds the
+// true valley anyway on half of these loops; it only adds valleys to polish, so its fit is never
+// worse than the window's alone.
+TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window misses") {
+  const std::vector<Case> cases = {
+      {"ex1", 8.4, 3.5243, 1.0, 1}, {"ex1", 4.0, 1.0, 1.0, 3},   {"ex1", 6.0, 3.0, 1.0, 4},
+      {"fopdt", 8.0, 3.0, 1.0, 7},  {"fopdt", 5.0, 2.0, 1.0, 8}, {"fopdt", 3.0, 1.0, 1.0, 9},
+      {"so", 5.0, 2.0, 1.0, 23},    {"so", 8.0, 1.5, 1.0, 24},   {"int", 5.0, 2.0, 1.0, 25},
+      {"fopdt", 6.0, 2.0, 2.0, 22}, {"ex1", 10.0, 2.0, 2.0, 6},  {"so", 3.0, 0.5, 0.5, 26},
+  };
+#ifdef VALVEDIAG_SANITIZED
+  const std::size_t stride = 6;
+#else
+  const std::size_t stride = 1;
+#endif
+  StictionQuantificationOptions window;
+  window.global_starts = 0;
+  int ok_window = 0, ok = 0;
+  std::size_t run = 0;
+  std::printf("\nnoisy loops: He truth vs the probe's window alone vs with the coarse lattice\n");
+  std::printf("%-5s %5s | %5s %5s | %5s %5s | %5s %5s %-4s %5s | %5s %5s %-4s %5s | %s\n", "loop",
+              "noise", "fs", "fd", "P fs^", "P fd^", "fs^", "fd^", "", "fit", "fs^", "fd^", "",
+              "fit", "fs 95 %");
+  for (std::size_t i = 0; i < cases.size(); i += stride, ++run) {
+    const Case& c = cases[i];
+    const LoopData d = run_scenario(case_loop(c), c.seed, 0);
+    const IdentificationResult r = identify(d.op, d.pv, case_fit_options(c.loop));
+    const auto a = quantify_stiction(r.model, d.op, d.pv, window);
+    const auto b = quantify_stiction(r.model, d.op, d.pv);
+    const bool a_ok = within(a.overall.fs_percent, c.fs) && within(a.overall.fd_percent, c.fd);
+    const bool b_ok = within(b.overall.fs_percent, c.fs) && within(b.overall.fd_percent, c.fd);
+    ok_window += a_ok;
+    ok += b_ok;
+    std::printf(
+        "%-5s %5.1f | %5.2f %5.2f | %5.2f %5.2f | %5.2f %5.2f %-4s %5.1f | %5.2f %5.2f %-4s %5.1f "
+        "| "
+        "%5.2f-%.2f\n",
+        c.loop.c_str(), c.noise, c.fs, c.fd, a.preisach.fs_percent, a.preisach.fd_percent,
+        a.overall.fs_percent, a.overall.fd_percent, a_ok ? "ok" : "MISS", a.overall.fit_percent,
+        b.overall.fs_percent, b.overall.fd_percent, b_ok ? "ok" : "MISS", b.overall.fit_percent,
+        b.interval.fs_lo, b.interval.fs_hi);
+    CHECK(b.overall.fit_percent >= a.overall.fit_percent - 1e-9);
+  }
+  std::printf("within 20 %% or 0.5 %% of travel: window alone %d, with the lattice %d of %zu\n",
+              ok_window, ok, run);
+  // Measured (Release): 2 and 7 of 12. In each miss the truth, its linear part fitted, fits the
+  // data better than the estimate: the search, not the data, is what is left.
+#ifndef VALVEDIAG_SANITIZED
+  CHECK(ok >= 6);
+  CHECK(ok >= ok_window + 3);
+#endif
 }
