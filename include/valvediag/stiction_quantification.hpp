@@ -53,10 +53,12 @@
 // region where the valve is held (PositionDependentStiction), region by region, around the overall
 // figures. The probe's window is only as good as the Preisach model, and measurement noise biases
 // that (equation error): so a coarse lattice over every band the visited range allows is scored
-// too (with the own poles and with the Preisach valve's, the lower cost), its best valleys away
+// too (with the own poles, the Preisach valve's and Steiglitz-McBride's, the lowest cost; SM's
+// filtering by 1/A makes the equation error's noise nearly white, so it does not bias the poles
+// the way it biases the own ones), its best valleys away
 // from the window's are polished as well, and then, while that lowers the cost, the lattice is
 // scored again with the best fit's linear part and its best new valleys polished (12 loops at
-// noise 0.5-2: 2 within 20 % from the window alone, 7 with the lattice; in each miss the truth
+// noise 0.5-2: 2 within 20 % from the window alone, 8 with the lattice; in each miss the truth
 // fits better than the estimate, so the search is what is left). The profile-likelihood interval
 // (StictionInterval) then says how well the data fix the figures. Measured on 19 simulated loops (4
 // processes, noise 0.05-0.3, fs 2-10, fd 0.5-4): 19 within 20 % or 0.5 % of travel, most within 0.1
@@ -93,6 +95,9 @@ struct StictionQuantificationOptions {
   // Rounds of the coarse lattice: after the first, it is scored again with the best fit's linear
   // part and its best new valleys polished, while that lowers the cost.
   int global_rounds = 3;
+  // The coarse lattice's bands are scored with the equation error's poles, the Preisach valve's
+  // and Steiglitz-McBride's after this many passes from those (0: not), the lowest cost kept.
+  int global_sm_passes = 3;
   // Score each point of the coarse search with poles of its own (the equation error's for its
   // valve) and polish from them; false: with the poles fitted to the Preisach valve's position.
   bool refine_own_linear = true;

@@ -410,6 +410,52 @@ class HeDataFit {
     if (!th.allFinite() || !is_stable(a, 1e-6)) return {};
     return a;
   }
+  // Steiglitz-McBride: the output error's poles for the valve position x, approached by the
+  // equation error of y and x filtered by 1/A of the previous pass (so its noise is nearly white
+  // and does not bias A), from the current poles, `passes` times. Empty when A comes out unstable.
+  std::vector<double> sm_poles(const std::vector<double>& x, int passes) const {
+    const int na = static_cast<int>(a_.size());
+    if (na == 0 || identity_) return {};
+    std::vector<double> a = a_;
+    auto mean = [&](const std::vector<double>& v) {
+      double m = 0;
+      for (double e : v) m += e;
+      return m / static_cast<double>(v.size());
+    };
+    const double my = mean(y_), mx = mean(x);
+    for (int pass = 0; pass < passes; ++pass) {
+      auto through = [&](const std::vector<double>& in, double m, std::vector<double>& out) {
+        out.resize(in.size());
+        for (std::size_t t = 0; t < in.size(); ++t) {
+          double v = in[t] - m;
+          for (std::size_t i = 1; i <= a.size() && i <= t; ++i) v -= a[i - 1] * out[t - i];
+          out[t] = v;
+        }
+      };
+      through(y_, my, sm_y_);
+      through(x, mx, sm_x_);
+      // Columns: y(t), y(t-1) .. y(t-na), x's taps, 1; regressors all but the first, the lags of y
+      // with a minus sign.
+      Columns c;
+      for (int i = 0; i <= na; ++i) c.add(sm_y_, static_cast<std::size_t>(i));
+      for (int j = 1; j <= nb_; ++j) c.add(sm_x_, static_cast<std::size_t>(nk_ + j));
+      c.add(ones_, 0);
+      scored_dots(c, c, products_);
+      const int p = c.n - 1;
+      Eigen::MatrixXd M(p, p);
+      Eigen::VectorXd r(p);
+      auto sign = [na](int k) { return k >= 1 && k <= na ? -1.0 : 1.0; };
+      for (int i = 1; i <= p; ++i) {
+        for (int k = 1; k <= p; ++k) M(i - 1, k - 1) = sign(i) * sign(k) * products_(i, k);
+        r(i - 1) = sign(i) * products_(0, i);
+      }
+      M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
+      const Eigen::VectorXd th = M.ldlt().solve(r);
+      a.assign(th.data(), th.data() + na);
+      if (!th.allFinite() || !is_stable(a, 1e-6)) return {};
+    }
+    return a;
+  }
   const std::vector<double>& poles() const { return a_; }
   int delay() const { return nk_; }
   // At most what the scored rows leave room for (t0_ - dj >= 0 for every tap of B).
@@ -656,7 +702,8 @@ class HeDataFit {
   mutable std::unordered_map<std::uint64_t, double> costs_;  // by position fingerprint
   double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
-  mutable std::vector<double> x_, f_;  // scratch
+  mutable std::vector<double> x_, f_;        // scratch
+  mutable std::vector<double> sm_y_, sm_x_;  // scratch of sm_poles
 };
 
 // The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
@@ -1100,18 +1147,20 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   const unsigned workers = worker_count(opt.threads, pts.size());
   std::vector<HeDataFit> fits(workers, fit);
   std::vector<std::vector<double>> xs(workers);  // positions: not allocated per point
-  // The coarse lattice's bands are also scored with the Preisach valve's poles, the lower cost
-  // kept: far from the probe the equation error's poles can be far off too (noise biases them).
+  // The coarse lattice's bands are also scored with the Preisach valve's poles and with
+  // Steiglitz-McBride's from those, the lowest cost kept: far from the probe the equation error's
+  // poles can be far off (noise biases them; Steiglitz-McBride's filtering undoes most of that).
   std::vector<HeDataFit> held(own && hg > 0 ? workers : 0, fit);
+  std::vector<HeDataFit> smf(held.size(), fit);
   std::unordered_map<std::uint64_t, double> scored;
   std::mutex scored_mutex;
   parallel_for(pts.size(), workers, [&](unsigned w, std::size_t k) {
     HeDataFit& f = fits[w];
     std::vector<double>& x = xs[w];
     Point& pt = pts[k];
-    const double held_cost = k >= local_points && !held.empty()
-                                 ? held[w].cost(pt.fs, pt.fd)
-                                 : std::numeric_limits<double>::infinity();
+    const bool coarse = k >= local_points && !held.empty();
+    const double held_cost =
+        coarse ? held[w].cost(pt.fs, pt.fd) : std::numeric_limits<double>::infinity();
     const std::uint64_t key = f.valve(pt.fs, pt.fd, x);
     if (opt.reuse_costs) {
       const std::lock_guard<std::mutex> lock(scored_mutex);
@@ -1124,6 +1173,15 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
     if (own) f.set_poles(poles_for(f, x));
     const double c = f.cost(x);
     pt.cost = std::min(held_cost, c);
+    if (coarse && opt.global_sm_passes > 0) {  // and with Steiglitz-McBride's poles
+      HeDataFit& g = smf[w];
+      g.set_poles(a_start);
+      const std::vector<double> a = g.sm_poles(x, opt.global_sm_passes);
+      if (!a.empty()) {
+        g.set_poles(a);
+        pt.cost = std::min(pt.cost, g.cost(x));
+      }
+    }
     if (opt.reuse_costs) {
       const std::lock_guard<std::mutex> lock(scored_mutex);
       scored.emplace(key, c);

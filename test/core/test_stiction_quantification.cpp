@@ -424,7 +424,7 @@ TEST_CASE("an asymmetric valve in closed loop: the region table shows where it s
 
 // Measurement noise biases the Preisach model (equation error), and with it the probe's window:
 // at noise 1 the probe says fs 13.7 for a true 5. The coarse lattice over every band finds the
-// true valley anyway on half of these loops; it only adds valleys to polish, so its fit is never
+// true valley anyway on most of these loops; it only adds valleys to polish, so its fit is never
 // worse than the window's alone.
 TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window misses") {
   const std::vector<Case> cases = {
@@ -468,10 +468,12 @@ TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window
   }
   std::printf("within 20 %% or 0.5 %% of travel: window alone %d, with the lattice %d of %zu\n",
               ok_window, ok, run);
-  // Measured (Release): 2 and 7 of 12. In each miss the truth, its linear part fitted, fits the
-  // data better than the estimate: the search, not the data, is what is left.
+  // Measured (Release): 2 and 8 of 12 (7 without Steiglitz-McBride's poles: the integrating loop
+  // stays at fs 21). In each miss the truth, its linear part fitted, fits the data better than
+  // the estimate: the search, not the data, is what is left; there the lattice's points near the
+  // truth cost 3-4 times the truth (its valley is narrower than the lattice step).
 #ifndef VALVEDIAG_SANITIZED
-  CHECK(ok >= 6);
-  CHECK(ok >= ok_window + 3);
+  CHECK(ok >= 8);
+  CHECK(ok >= ok_window + 5);
 #endif
 }
