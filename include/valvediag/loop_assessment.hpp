@@ -50,6 +50,9 @@ struct LoopAssessment {
   // He's fs (the static friction band) and the slip jump fs - fd, in % of valve travel (the OP
   // range), when the model has friction (Kano: S and J; Stenman and deadband: d).
   double stiction_percent = kNaN, slip_jump_percent = kNaN;
+  // The range of fs the data fit as well (95 % profile likelihood, stiction_quantification.hpp),
+  // when the size comes from a Preisach valve's refined figures; NaN otherwise.
+  double stiction_lo_percent = kNaN, stiction_hi_percent = kNaN;
   std::string model;  // best model (top of the climbed ladder)
   double fitness_percent = kNaN, validation_fitness_percent = kNaN;
   std::string first_missing;  // the effect the linear model misses first ("" when none)
@@ -84,6 +87,8 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name,
 // empty: the probe's figures). `threads`: for the refinement (0: all cores).
 struct FrictionSize {
   double band_percent = LoopAssessment::kNaN, jump_percent = LoopAssessment::kNaN;
+  // The band's (fs's) interval, for a Preisach valve's refined figures (NaN otherwise).
+  double band_lo_percent = LoopAssessment::kNaN, band_hi_percent = LoopAssessment::kNaN;
 };
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
                            const std::vector<double>& pv, const OpRange& range = {},

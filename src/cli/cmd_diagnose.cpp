@@ -100,10 +100,14 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     // record cannot be judged).
     const FrictionSize fr =
         unusable.empty() ? friction_size(r, d.op, d.pv, range, o.fit.threads) : FrictionSize{};
-    if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent))
-      std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%\n",
+    if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent)) {
+      std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%",
                   fr.band_percent, fr.jump_percent);
-    else if (std::isfinite(fr.band_percent))
+      if (std::isfinite(fr.band_lo_percent))
+        std::printf("; the data fit fs %.2f-%.2f %% as well (95 %%)", fr.band_lo_percent,
+                    fr.band_hi_percent);
+      std::printf("\n");
+    } else if (std::isfinite(fr.band_percent))
       std::printf("stiction:  %.2f %% of valve travel (apparent, from the limit cycle)\n",
                   fr.band_percent);
     if (!a->json.empty()) {
@@ -113,6 +117,8 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       };
       j["stiction_percent"] = number(fr.band_percent);
       j["slip_jump_percent"] = number(fr.jump_percent);
+      j["stiction_lo_percent"] = number(fr.band_lo_percent);
+      j["stiction_hi_percent"] = number(fr.band_hi_percent);
       j["analysed_from_s"] = part.from_s;
       j["split_check"] = split_check_json(splits);
       write_text(a->json, j.dump(2) + "\n");

@@ -35,6 +35,13 @@ std::string fmt(double v, int prec = 1) {
   return report_format::fixed(v, prec, "-");
 }
 
+// " <small>(lo-hi)</small>": the range of fs the data fit as well, when known.
+std::string stiction_range_html(const LoopAssessment& a) {
+  if (!std::isfinite(a.stiction_lo_percent) || !std::isfinite(a.stiction_hi_percent)) return "";
+  return " <small title=\"fs the data fit as well (95 % profile likelihood)\">(" +
+         fmt(a.stiction_lo_percent, 2) + "-" + fmt(a.stiction_hi_percent, 2) + ")</small>";
+}
+
 std::string csv_field(const std::string& s) {
   if (s.find_first_of(",\"\n") == std::string::npos) return s;
   std::string o = "\"";
@@ -65,6 +72,8 @@ json assessment_json(const LoopAssessment& a) {
   j["severity"] = a.severity;
   j["stiction_percent"] = number(a.stiction_percent);
   j["slip_jump_percent"] = number(a.slip_jump_percent);
+  j["stiction_lo_percent"] = number(a.stiction_lo_percent);
+  j["stiction_hi_percent"] = number(a.stiction_hi_percent);
   j["model"] = a.model;
   j["fitness_percent"] = number(a.fitness_percent);
   j["validation_fitness_percent"] = number(a.validation_fitness_percent);
@@ -110,6 +119,8 @@ LoopAssessment assessment_from_json(const json& j) {
   a.severity = number_of(j, "severity");
   a.stiction_percent = number_of(j, "stiction_percent");
   a.slip_jump_percent = number_of(j, "slip_jump_percent");
+  a.stiction_lo_percent = number_of(j, "stiction_lo_percent");  // NaN in older results
+  a.stiction_hi_percent = number_of(j, "stiction_hi_percent");
   a.model = text_of(j, "model");
   a.fitness_percent = number_of(j, "fitness_percent");
   a.validation_fitness_percent = number_of(j, "validation_fitness_percent");
@@ -233,7 +244,7 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
   o << "rank,loop,verdict,severity,stiction_percent,slip_jump_percent,model,fitness_percent,"
        "validation_fitness_percent,first_missing,oscillating,period_s,op_reversals_per_hour,"
        "op_travel_percent_per_hour,time_at_limits_percent,samples,source,reason,error,"
-       "valve_travel,split_agreement\n";
+       "valve_travel,split_agreement,stiction_lo_percent,stiction_hi_percent\n";
   int rank = 0;
   auto n = [](double v) { return std::isfinite(v) ? fmt(v, 4) : std::string(); };
   for (const auto& a : loops)
@@ -246,7 +257,8 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
       << n(a.health.time_at_limits_percent) << "," << a.health.samples << "," << csv_field(a.source)
       << "," << csv_field(a.reason) << "," << csv_field(a.error) << ","
       << (a.valve_travel.decided ? a.valve_travel.verdict : "") << ","
-      << (a.split_verdicts.empty() ? "" : split_agreement_text(a)) << "\n";
+      << (a.split_verdicts.empty() ? "" : split_agreement_text(a)) << ","
+      << n(a.stiction_lo_percent) << "," << n(a.stiction_hi_percent) << "\n";
   return o.str();
 }
 
@@ -278,7 +290,8 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
     else
       o << html_escape(a.loop);
     o << "</td><td class=\"l\">" << html_escape(a.verdict) << "</td><td>"
-      << fmt(a.stiction_percent, 2) << "</td><td>" << fmt(a.slip_jump_percent, 2) << "</td>"
+      << fmt(a.stiction_percent, 2) << stiction_range_html(a) << "</td><td>"
+      << fmt(a.slip_jump_percent, 2) << "</td>"
       << "<td class=\"l\">" << html_escape(a.model) << "</td><td>" << fmt(a.fitness_percent)
       << "</td><td>" << fmt(a.validation_fitness_percent) << "</td><td class=\"l\">"
       << html_escape(a.first_missing) << "</td><td>"

@@ -38,6 +38,10 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
     if (q.valid && q.stiction) {
       a.band_percent = q.overall.fs_percent * 100.0 / width;
       a.jump_percent = q.overall.jump_percent * 100.0 / width;
+      if (q.interval.valid) {
+        a.band_lo_percent = q.interval.fs_lo * 100.0 / width;
+        a.band_hi_percent = q.interval.fs_hi * 100.0 / width;
+      }
     } else if (q.valid) {
       a.band_percent = 0.0;
       a.jump_percent = 0.0;
@@ -63,6 +67,7 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
     }
     a.band_percent = 100.0 * band / width;
     a.jump_percent = 100.0 * jump / width;
+    a.band_lo_percent = a.band_hi_percent = LoopAssessment::kNaN;  // not the Preisach valve's
   }
   return a;
 }
@@ -212,6 +217,8 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   const FrictionSize fr = friction_size(dg, x.op, x.pv, opt.range, opt.diagnose.fit.threads);
   a.stiction_percent = fr.band_percent;
   a.slip_jump_percent = fr.jump_percent;
+  a.stiction_lo_percent = fr.band_lo_percent;
+  a.stiction_hi_percent = fr.band_hi_percent;
   a.reason = dg.conclusion;
   if (lead.cut()) {
     std::string s = describe_lead_in(lead, d.t, d.t.front());

@@ -20,6 +20,8 @@
 #include "../../src/cli/isolated_jobs.hpp"
 #include "../common/sqlite_exec.hpp"
 #include "valvediag/loop_assessment.hpp"
+#include "valvediag/model_fit.hpp"
+#include "valvediag/model_spec.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sweep_report.hpp"
 #include "valvediag/sweep_store.hpp"
@@ -109,6 +111,30 @@ TEST_CASE("assess_loop: a sticky valve whose OP reverses 3 times is judged and s
 #endif
 }
 
+// A Preisach valve's size comes from its refined He figures, with the range of fs the data fit
+// as well; a fitted He valve's has no such range (its parameters are the figures).
+TEST_CASE("friction_size: a Preisach valve's band comes with its interval, He's without") {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 3000);
+  ModelFitOptions o;
+  o.structure = {1, 1, 1, 1, 3, 6};
+  o.preisach_L_min = 16;
+  o.preisach_L_max = 16;
+  const double Ts = d.sample_period();
+  const ModelFit p = fit_model(d.op, d.pv, Ts, parse_model_spec("preisach"), o);
+  REQUIRE(p.preisach.has_value());
+  const FrictionSize a = friction_size(p, d.op, d.pv);
+  CHECK(a.band_percent == doctest::Approx(8.4).epsilon(0.2));
+  REQUIRE(std::isfinite(a.band_lo_percent));
+  CHECK(a.band_lo_percent <= a.band_percent);
+  CHECK(a.band_percent <= a.band_hi_percent);
+  CHECK(a.band_hi_percent - a.band_lo_percent < 2.0);
+  const ModelFit he = fit_model(d.op, d.pv, Ts, parse_model_spec("stiction"), o);
+  const FrictionSize b = friction_size(he, d.op, d.pv);
+  CHECK(b.band_percent == doctest::Approx(8.4).epsilon(0.1));
+  CHECK(std::isnan(b.band_lo_percent));
+  CHECK(std::isnan(b.band_hi_percent));
+}
+
 TEST_CASE("results survive their JSON round trip; rank puts the worst valve first") {
   LoopAssessment a;
   a.loop = "FIC101";
@@ -116,6 +142,8 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   a.verdict = "stiction";
   a.stiction_percent = 2.5;
   a.slip_jump_percent = 1.0;
+  a.stiction_lo_percent = 2.1;
+  a.stiction_hi_percent = 3.25;
   a.model = "stiction";
   a.fitness_percent = 91.5;
   a.validation_fitness_percent = 88.0;
@@ -148,7 +176,24 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(b.loop == a.loop);
   CHECK(b.verdict == a.verdict);
   CHECK(b.stiction_percent == 2.5);
+  CHECK(b.stiction_lo_percent == 2.1);
+  CHECK(b.stiction_hi_percent == 3.25);
   CHECK(b.ladder.size() == 2);
+  // Results written before the interval existed read as "not known".
+  nlohmann::json older = assessment_json(a);
+  older.erase("stiction_lo_percent");
+  older.erase("stiction_hi_percent");
+  const LoopAssessment o = assessment_from_json(older);
+  CHECK(std::isnan(o.stiction_lo_percent));
+  CHECK(std::isnan(o.stiction_hi_percent));
+  CHECK(o.stiction_percent == 2.5);
+  // The CSV carries it in two columns after the ones scripts already read by position.
+  const std::string one = sweep_csv({a});
+  const std::string header = one.substr(0, one.find('\n'));
+  CHECK(header.size() > 40);
+  CHECK(header.substr(header.size() - 40) == ",stiction_lo_percent,stiction_hi_percent");
+  CHECK(one.find(",2.1000,3.2500\n") != std::string::npos);
+  CHECK(sweep_html({}, {a}, {}).find("(2.10-3.25)") != std::string::npos);
   CHECK(b.ladder[1].validation_fitness_percent == 88.0);
   CHECK(b.health.oscillating);
   CHECK(b.health.period_s == 120);
@@ -241,7 +286,7 @@ TEST_CASE(
   CHECK(table.find(" 2/3\n") != std::string::npos);
   CHECK(table.find("1 loop(s) whose verdict depends on where the record is split") !=
         std::string::npos);
-  CHECK(sweep_csv(v).find(",2/3\n") != std::string::npos);
+  CHECK(sweep_csv(v).find(",2/3,,\n") != std::string::npos);
   const LoopAssessment back =
       assessment_from_json(nlohmann::json::parse(assessment_json(fragile).dump()));
   REQUIRE(back.split_verdicts.size() == 2);
