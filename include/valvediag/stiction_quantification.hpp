@@ -84,6 +84,9 @@ struct StictionQuantificationOptions {
   // With pv: refine the overall figures by fitting He's valve inside the Hammerstein structure to
   // the data, searched within this many grid steps of the Preisach figures.
   bool refine_on_data = true;
+  // Refine too when the probe's band is below its grid step; stiction is then reported when the
+  // refined band exceeds that step and its interval excludes fs = 0.
+  bool refine_unresolved = true;
   double refine_window_steps = 3.0;
   int refine_passes = 2;  // re-estimations of the linear part's poles and delay
   int refine_starts = 8;  // separate valleys of the coarse search that are polished

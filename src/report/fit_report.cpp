@@ -143,19 +143,27 @@ std::string format_stiction(const StictionQuantification& q) {
       << " % of travel (He; band " << num(q.overall.band_percent, 2) << " %, slip jump "
       << num(q.overall.jump_percent, 2) << " %), resolution " << num(q.resolution_percent, 2)
       << " %\n";
-    if (!q.jump_identified)
+    if (!q.jump_identified && !q.refined)
       o << "           the data's sweeps are shorter than 2 fs: the split of the band into fs and "
            "fd is not identified\n";
-    const StictionInterval& iv = q.interval;
-    if (iv.valid)
-      o << "           the data fit fs " << num(iv.fs_lo, 2) << "-" << num(iv.fs_hi, 2) << " %, fd "
-        << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within "
-        << num(100 * std::erf(std::sqrt(iv.chi2 / 2)), 0) << " % (profile likelihood, "
-        << num(iv.effective_samples, 0) << " effective samples, lattice step "
-        << num(iv.step_percent, 2) << " %" << (iv.capped ? "; at least that wide" : "") << ")\n";
+  } else if (q.refined) {
+    o << "none resolved ("
+      << (q.interval.valid && q.interval.fs_lo > 0
+              ? "He's band " + num(q.overall.band_percent, 2) + " % is below the grid step " +
+                    num(q.resolution_percent, 2) + " %"
+              : std::string("a valve without stiction fits the data as well"))
+      << "; best fs " << num(q.overall.fs_percent, 2) << " %, fd " << num(q.overall.fd_percent, 2)
+      << " %)\n";
   } else {
     o << "none resolved (band below the grid step " << num(q.resolution_percent, 2) << " %)\n";
   }
+  const StictionInterval& iv = q.interval;
+  if (iv.valid)
+    o << "           the data fit fs " << num(iv.fs_lo, 2) << "-" << num(iv.fs_hi, 2) << " %, fd "
+      << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within "
+      << num(100 * std::erf(std::sqrt(iv.chi2 / 2)), 0) << " % (profile likelihood, "
+      << num(iv.effective_samples, 0) << " effective samples, lattice step "
+      << num(iv.step_percent, 2) << " %" << (iv.capped ? "; at least that wide" : "") << ")\n";
   if (!q.data_given) o << "           (probed over the whole grid: the OP data was not given)\n";
   for (const auto& g : q.regions) {
     o << "           OP " << num(g.op_lo, 1) << "-" << num(g.op_hi, 1) << ": ";

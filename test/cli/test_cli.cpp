@@ -173,8 +173,8 @@ TEST_CASE("fit writes the JSON keys and the series others rely on") {
   CHECK(iv["level"].get<double>() == doctest::Approx(0.95).epsilon(1e-3));
   CHECK(iv["effective_samples"].get<double>() >= 1.0);
   CHECK(st.out.find("the data fit fs") != std::string::npos);
-  // Without a resolved band there is nothing to bracket.
-  if (!j["stiction"]["stiction"].get<bool>()) CHECK(j["stiction"]["interval"].is_null());
+  // The 2 % valve on the small grid: refined on the data whether or not the probe resolved it.
+  CHECK(j["stiction"]["interval"].is_object());
   REQUIRE(!j["mu"].empty());
   for (const auto& w : j["mu"]) {
     CHECK(w["i"].get<int>() <= w["j"].get<int>());
