@@ -751,24 +751,33 @@ double refine_poles(HeDataFit& fit, const std::vector<double>& x) {
   return best;
 }
 
-// The profile-likelihood interval of (fs, fd) around the best (bfs, bfd) of cost `best`
-// (StictionInterval). `fit` holds the best's linear part; `own_delay` >= 0: candidates are also
-// scored with their own equation-error poles at that delay (`fallback_poles` where those are
-// unstable), whichever cost is lower (`own_costs`: such costs already known, by position
-// fingerprint). The lattice (fs, fd) = (bfs + i h, bfd + j h)
-// starts as the box of half-width `half` around the best; a side that holds a candidate within the
-// threshold is moved out by `half`, until 0 <= fd <= fs <= width or the point budget. The
-// search's other polished valleys (`valleys`) count too: within the threshold they fit as well,
-// however far from the best (on real loops the cost is nearly flat across quite different bands).
 struct Candidate {
   double cost, fs, fd;
 };
-StictionInterval profile_interval(const HeDataFit& fit, int own_delay,
-                                  const std::vector<double>& fallback_poles,
-                                  const std::unordered_map<std::uint64_t, double>& own_costs,
-                                  const std::vector<Candidate>& valleys,
-                                  const StictionQuantificationOptions& opt, double bfs, double bfd,
-                                  double best, double h, double half, double width) {
+// Candidates scored with their own equation-error poles too, whichever cost is lower: at `delay`
+// (< 0: not), with `fallback` where those come out unstable; `known`: such costs already
+// computed, by position fingerprint.
+struct OwnPoles {
+  int delay;
+  const std::vector<double>& fallback;
+  const std::unordered_map<std::uint64_t, double>& known;
+};
+// The lattice (fs, fd) = (best.fs + i step, best.fd + j step) within 0 <= fd <= fs <= width; it
+// starts as the box of half-width `half` around the best.
+struct Lattice {
+  double step, half, width;
+};
+
+// The profile-likelihood interval of (fs, fd) around `best` (StictionInterval). `fit` holds the
+// best's linear part. A side of the lattice's box that holds a candidate within the threshold is
+// moved out by `half`, until the lattice's limits or the point budget. The search's other
+// polished valleys (`valleys`) count too: within the threshold they fit as well, however far from
+// the best (on real loops the cost is nearly flat across quite different bands).
+StictionInterval profile_interval(const HeDataFit& fit, Candidate best, const OwnPoles& own_poles,
+                                  const std::vector<Candidate>& valleys, const Lattice& lattice,
+                                  const StictionQuantificationOptions& opt) {
+  const double bfs = best.fs, bfd = best.fd, h = lattice.step, half = lattice.half,
+               width = lattice.width;
   StictionInterval iv;
   iv.chi2 = opt.interval_chi2;
   iv.step_percent = h;
@@ -797,8 +806,8 @@ StictionInterval profile_interval(const HeDataFit& fit, int own_delay,
     }
     const unsigned workers = worker_count(opt.threads, todo.size());
     std::vector<HeDataFit> same(workers, fit);
-    std::vector<HeDataFit> own(own_delay >= 0 ? workers : 0, fit);
-    for (HeDataFit& f : own) f.set_delay(own_delay);
+    std::vector<HeDataFit> own(own_poles.delay >= 0 ? workers : 0, fit);
+    for (HeDataFit& f : own) f.set_delay(own_poles.delay);
     std::vector<std::vector<double>> xs(workers);
     std::vector<double> c(todo.size());
     parallel_for(todo.size(), workers, [&](unsigned w, std::size_t k) {
@@ -807,20 +816,20 @@ StictionInterval profile_interval(const HeDataFit& fit, int own_delay,
       if (own.empty()) return;
       HeDataFit& f = own[w];
       const std::uint64_t key = f.valve(fs, fd, xs[w]);
-      const auto known = opt.reuse_costs ? own_costs.find(key) : own_costs.end();
-      if (known != own_costs.end()) {
+      const auto known = opt.reuse_costs ? own_poles.known.find(key) : own_poles.known.end();
+      if (known != own_poles.known.end()) {
         c[k] = std::min(c[k], known->second);
         return;
       }
       const std::vector<double> a = f.ls_poles(xs[w]);
-      f.set_poles(a.empty() ? fallback_poles : a);
+      f.set_poles(a.empty() ? own_poles.fallback : a);
       c[k] = std::min(c[k], f.cost(xs[w]));
     });
     for (std::size_t k = 0; k < todo.size(); ++k) {
       cost[todo[k]] = c[k];
-      best = std::min(best, c[k]);
+      best.cost = std::min(best.cost, c[k]);
     }
-    const double limit = best * iv.cost_ratio;
+    const double limit = best.cost * iv.cost_ratio;
     auto inside_at = [&](bool row, int at) {
       for (const auto& [ij, v] : cost)
         if ((row ? ij.first : ij.second) == at && v <= limit) return true;
@@ -839,7 +848,7 @@ StictionInterval profile_interval(const HeDataFit& fit, int own_delay,
     widen(jhi, false, m, static_cast<int>(std::floor((fs_of(ihi) - bfd + eps) / h)));
     if (!grow) break;
   }
-  const double limit = best * iv.cost_ratio;
+  const double limit = best.cost * iv.cost_ratio;
   iv.fs_lo = iv.fs_hi = bfs;
   iv.fd_lo = iv.fd_hi = bfd;
   std::vector<Candidate> inside = valleys;
@@ -1301,9 +1310,9 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   fit.set_delay(best_delay);
   if (arx) refine_linear(fit, fit.valve(bfs, bfd));
   if (opt.interval) {
-    q.interval =
-        profile_interval(fit, own ? nk_start : -1, a_start, scored, polished, opt, bfs, bfd,
-                         std::min(bcost, fit.cost(bfs, bfd)), h, std::max(delta / 2, 2 * h), width);
+    q.interval = profile_interval(fit, {std::min(bcost, fit.cost(bfs, bfd)), bfs, bfd},
+                                  {own ? nk_start : -1, a_start, scored}, polished,
+                                  {h, std::max(delta / 2, 2 * h), width}, opt);
   }
 
   // Per region: He's bands where the valve sticks in that region (PositionDependentStiction),
