@@ -66,6 +66,7 @@
 // is only roughly right (its order is).
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <string>
 #include <vector>
@@ -152,6 +153,7 @@ struct StictionInterval {
   double step_percent = 0.0;       // the lattice step: the ends are known to it
   std::size_t points = 0;          // candidates scored
   bool capped = false;             // the point budget stopped the widening: at least this wide
+  double level() const { return std::erf(std::sqrt(chi2 / 2)); }  // chi2's probability (0.95)
 };
 
 struct StictionRegion {

@@ -291,8 +291,8 @@ std::string pct(double v, int prec = 1) {
 std::string interval_clause(const StictionInterval& iv) {
   if (!iv.valid) return "";
   return "; the data fit fs " + pct(iv.fs_lo) + "-" + pct(iv.fs_hi) + " %, fd " + pct(iv.fd_lo) +
-         "-" + pct(iv.fd_hi) + " % within " + pct(100 * std::erf(std::sqrt(iv.chi2 / 2)), 0) +
-         " % (profile likelihood" + (iv.capped ? ", at least that wide" : "") + ")";
+         "-" + pct(iv.fd_hi) + " % within " + pct(100 * iv.level(), 0) + " % (profile likelihood" +
+         (iv.capped ? ", at least that wide" : "") + ")";
 }
 
 // The summary of a valid quantification: "stiction: fs .. % of travel (...) over OP lo-hi %", or
@@ -393,29 +393,17 @@ class HeDataFit {
     all.add(ones_, 0);
     products_.resize(taps.n, all.n);
     scored_dots(taps, all, products_);
-    // Regressors [-y(t-1) .. -y(t-na), x's taps, 1] against y(t).
-    const int p = na + nb_ + 1;
-    const int c = p - 1;
-    Eigen::MatrixXd M(p, p);
-    Eigen::VectorXd r(p);
-    for (int i = 1; i <= na; ++i) {
-      for (int k = 1; k <= na; ++k) M(i - 1, k - 1) = y_lags_(i, k);
-      M(i - 1, c) = M(c, i - 1) = -y_lags_(i, na + 1);
-      r(i - 1) = -y_lags_(0, i);
+    // The products of all columns: y's and the constant's from the constructor, the taps' here.
+    const int n = all.n, one = n - 1;
+    Eigen::MatrixXd P(n, n);
+    for (int i = 0; i <= na; ++i) {
+      for (int k = 0; k <= na; ++k) P(i, k) = y_lags_(i, k);
+      P(i, one) = P(one, i) = y_lags_(i, na + 1);
     }
-    for (int j = 0; j < nb_; ++j) {
-      for (int i = 1; i <= na; ++i) M(i - 1, na + j) = M(na + j, i - 1) = -products_(j, i);
-      for (int k = 0; k < nb_; ++k) M(na + j, na + k) = products_(j, na + 1 + k);
-      M(na + j, c) = M(c, na + j) = products_(j, na + 1 + nb_);
-      r(na + j) = products_(j, 0);
-    }
-    M(c, c) = static_cast<double>(u_.size() - t0_);
-    r(c) = y_lags_(0, na + 1);
-    M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
-    const Eigen::VectorXd th = M.ldlt().solve(r);
-    std::vector<double> a(th.data(), th.data() + na);
-    if (!th.allFinite() || !is_stable(a, 1e-6)) return {};
-    return a;
+    P(one, one) = y_lags_(na + 1, na + 1);
+    for (int j = 0; j < nb_; ++j)
+      for (int k = 0; k < n; ++k) P(na + 1 + j, k) = P(k, na + 1 + j) = products_(j, k);
+    return arx_poles(P, na);
   }
   // Steiglitz-McBride: the output error's poles for the valve position x, approached by the
   // equation error of y and x filtered by 1/A of the previous pass (so its noise is nearly white
@@ -424,10 +412,9 @@ class HeDataFit {
     const int na = static_cast<int>(a_.size());
     if (na == 0 || identity_) return {};
     std::vector<double> a = a_;
-    auto mean = [&](const std::vector<double>& v) {
-      double m = 0;
-      for (double e : v) m += e;
-      return m / static_cast<double>(v.size());
+    auto mean = [](const std::vector<double>& v) {
+      return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()))
+          .mean();
     };
     const double my = mean(y_), mx = mean(x);
     for (int pass = 0; pass < passes; ++pass) {
@@ -441,25 +428,13 @@ class HeDataFit {
       };
       through(y_, my, sm_y_);
       through(x, mx, sm_x_);
-      // Columns: y(t), y(t-1) .. y(t-na), x's taps, 1; regressors all but the first, the lags of y
-      // with a minus sign.
-      Columns c;
+      Columns c;  // as arx_poles takes them
       for (int i = 0; i <= na; ++i) c.add(sm_y_, static_cast<std::size_t>(i));
       for (int j = 1; j <= nb_; ++j) c.add(sm_x_, static_cast<std::size_t>(nk_ + j));
       c.add(ones_, 0);
       scored_dots(c, c, products_);
-      const int p = c.n - 1;
-      Eigen::MatrixXd M(p, p);
-      Eigen::VectorXd r(p);
-      auto sign = [na](int k) { return k >= 1 && k <= na ? -1.0 : 1.0; };
-      for (int i = 1; i <= p; ++i) {
-        for (int k = 1; k <= p; ++k) M(i - 1, k - 1) = sign(i) * sign(k) * products_(i, k);
-        r(i - 1) = sign(i) * products_(0, i);
-      }
-      M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
-      const Eigen::VectorXd th = M.ldlt().solve(r);
-      a.assign(th.data(), th.data() + na);
-      if (!th.allFinite() || !is_stable(a, 1e-6)) return {};
+      a = arx_poles(products_, na);
+      if (a.empty()) return {};
     }
     return a;
   }
@@ -555,6 +530,24 @@ class HeDataFit {
       }
     }
     return std::max(0.0, yy - th.dot(rs));
+  }
+  // Equation-error least squares of y(t) on [-y(t-1) .. -y(t-na), x's taps, 1] from the products
+  // P of the columns [y(t), y(t-1) .. y(t-na), x's taps, 1]: A's coefficients, or empty when A
+  // comes out unstable.
+  static std::vector<double> arx_poles(const Eigen::MatrixXd& P, int na) {
+    const Eigen::Index p = P.rows() - 1;
+    auto sign = [na](Eigen::Index k) { return k >= 1 && k <= na ? -1.0 : 1.0; };
+    Eigen::MatrixXd M(p, p);
+    Eigen::VectorXd r(p);
+    for (Eigen::Index i = 1; i <= p; ++i) {
+      for (Eigen::Index k = 1; k <= p; ++k) M(i - 1, k - 1) = sign(i) * sign(k) * P(i, k);
+      r(i - 1) = sign(i) * P(0, i);
+    }
+    M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
+    const Eigen::VectorXd th = M.ldlt().solve(r);
+    std::vector<double> a(th.data(), th.data() + na);
+    if (!th.allFinite() || !is_stable(a, 1e-6)) return {};
+    return a;
   }
   static constexpr int kMaxColumns = 10;
   // Regressor columns as lagged series: column k holds v[t - lag] in row t.
@@ -1134,8 +1127,11 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // a few Preisach grid steps around the Preisach figures, each point scored with a linear part of
   // its own (refine_own_linear), then the best few separate valleys are each polished (linear
   // part by output error, then a finer grid) and the best wins.
-  const double h = std::clamp((fs0 + fd0) / 40, 0.02, 0.1);
+  // The step follows the band, at most 200 steps across the window (an unresolved probe's zero
+  // band with a large grid step would otherwise make it 0.02 over several % of travel: 10^5
+  // points). Above the step the window is 3 steps, so only unresolved bands meet the cap.
   const double W = opt.refine_window_steps * delta;
+  const double h = std::max(std::clamp((fs0 + fd0) / 40, 0.02, 0.1), W / 200);
   using Point = Candidate;
   // The poles a candidate's valve position is scored with: the equation error's for that valve,
   // or the Preisach valve's. Scored with the Preisach valve's alone, the grid's ranking depends on
@@ -1173,40 +1169,44 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // poles can be far off (noise biases them; Steiglitz-McBride's filtering undoes most of that).
   std::vector<HeDataFit> held(own && hg > 0 ? workers : 0, fit);
   std::vector<HeDataFit> smf(held.size(), fit);
-  std::unordered_map<std::uint64_t, double> scored;
+  // Each cost depends on the position alone, so it is remembered by the position's fingerprint:
+  // `scored` the own poles' (the interval reuses it), `sm_scored` Steiglitz-McBride's.
+  std::unordered_map<std::uint64_t, double> scored, sm_scored;
   std::mutex scored_mutex;
+  auto remembered = [&](std::unordered_map<std::uint64_t, double>& costs, std::uint64_t key,
+                        auto&& compute) {
+    if (opt.reuse_costs) {
+      const std::lock_guard<std::mutex> lock(scored_mutex);
+      const auto seen = costs.find(key);
+      if (seen != costs.end()) return seen->second;
+    }
+    const double c = compute();
+    if (opt.reuse_costs) {
+      const std::lock_guard<std::mutex> lock(scored_mutex);
+      costs.emplace(key, c);
+    }
+    return c;
+  };
   parallel_for(pts.size(), workers, [&](unsigned w, std::size_t k) {
     HeDataFit& f = fits[w];
     std::vector<double>& x = xs[w];
     Point& pt = pts[k];
-    const bool coarse = k >= local_points && !held.empty();
-    const double held_cost =
-        coarse ? held[w].cost(pt.fs, pt.fd) : std::numeric_limits<double>::infinity();
     const std::uint64_t key = f.valve(pt.fs, pt.fd, x);
-    if (opt.reuse_costs) {
-      const std::lock_guard<std::mutex> lock(scored_mutex);
-      const auto seen = scored.find(key);
-      if (seen != scored.end()) {
-        pt.cost = std::min(held_cost, seen->second);
-        return;
-      }
-    }
-    if (own) f.set_poles(poles_for(f, x));
-    const double c = f.cost(x);
-    pt.cost = std::min(held_cost, c);
-    if (coarse && opt.global_sm_passes > 0) {  // and with Steiglitz-McBride's poles
-      HeDataFit& g = smf[w];
-      g.set_poles(a_start);
-      const std::vector<double> a = g.sm_poles(x, opt.global_sm_passes);
-      if (!a.empty()) {
-        g.set_poles(a);
-        pt.cost = std::min(pt.cost, g.cost(x));
-      }
-    }
-    if (opt.reuse_costs) {
-      const std::lock_guard<std::mutex> lock(scored_mutex);
-      scored.emplace(key, c);
-    }
+    pt.cost = remembered(scored, key, [&] {
+      if (own) f.set_poles(poles_for(f, x));
+      return f.cost(x);
+    });
+    if (k < local_points || held.empty()) return;
+    pt.cost = std::min(pt.cost, held[w].cost(pt.fs, pt.fd));
+    if (opt.global_sm_passes > 0)  // and with Steiglitz-McBride's poles
+      pt.cost = std::min(pt.cost, remembered(sm_scored, key, [&] {
+                           HeDataFit& g = smf[w];
+                           g.set_poles(a_start);
+                           const std::vector<double> a = g.sm_poles(x, opt.global_sm_passes);
+                           if (a.empty()) return std::numeric_limits<double>::infinity();
+                           g.set_poles(a);
+                           return g.cost(x);
+                         }));
   });
   // The window's best separate valleys, then the coarse lattice's best ones apart from those.
   auto by_cost = [](const Point& l, const Point& r) { return l.cost < r.cost; };

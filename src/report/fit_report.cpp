@@ -160,10 +160,10 @@ std::string format_stiction(const StictionQuantification& q) {
   const StictionInterval& iv = q.interval;
   if (iv.valid)
     o << "           the data fit fs " << num(iv.fs_lo, 2) << "-" << num(iv.fs_hi, 2) << " %, fd "
-      << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within "
-      << num(100 * std::erf(std::sqrt(iv.chi2 / 2)), 0) << " % (profile likelihood, "
-      << num(iv.effective_samples, 0) << " effective samples, lattice step "
-      << num(iv.step_percent, 2) << " %" << (iv.capped ? "; at least that wide" : "") << ")\n";
+      << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within " << num(100 * iv.level(), 0)
+      << " % (profile likelihood, " << num(iv.effective_samples, 0)
+      << " effective samples, lattice step " << num(iv.step_percent, 2) << " %"
+      << (iv.capped ? "; at least that wide" : "") << ")\n";
   if (!q.data_given) o << "           (probed over the whole grid: the OP data was not given)\n";
   for (const auto& g : q.regions) {
     o << "           OP " << num(g.op_lo, 1) << "-" << num(g.op_hi, 1) << ": ";
@@ -183,16 +183,11 @@ std::string format_stiction(const StictionQuantification& q) {
 
 nlohmann::json interval_json(const StictionInterval& iv) {
   if (!iv.valid) return nullptr;
-  return {{"fs_lo_percent", iv.fs_lo},
-          {"fs_hi_percent", iv.fs_hi},
-          {"fd_lo_percent", iv.fd_lo},
-          {"fd_hi_percent", iv.fd_hi},
-          {"level", std::erf(std::sqrt(iv.chi2 / 2))},
-          {"effective_samples", iv.effective_samples},
-          {"cost_ratio", iv.cost_ratio},
-          {"step_percent", iv.step_percent},
-          {"points", iv.points},
-          {"capped", iv.capped}};
+  return {{"fs_lo_percent", iv.fs_lo},   {"fs_hi_percent", iv.fs_hi},
+          {"fd_lo_percent", iv.fd_lo},   {"fd_hi_percent", iv.fd_hi},
+          {"level", iv.level()},         {"effective_samples", iv.effective_samples},
+          {"cost_ratio", iv.cost_ratio}, {"step_percent", iv.step_percent},
+          {"points", iv.points},         {"capped", iv.capped}};
 }
 
 nlohmann::json stiction_json(const StictionQuantification& q) {

