@@ -1187,16 +1187,15 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
     }
     return c;
   };
-  parallel_for(pts.size(), workers, [&](unsigned w, std::size_t k) {
+  auto score = [&](unsigned w, Point& pt, bool lattice) {
     HeDataFit& f = fits[w];
     std::vector<double>& x = xs[w];
-    Point& pt = pts[k];
     const std::uint64_t key = f.valve(pt.fs, pt.fd, x);
     pt.cost = remembered(scored, key, [&] {
       if (own) f.set_poles(poles_for(f, x));
       return f.cost(x);
     });
-    if (k < local_points || held.empty()) return;
+    if (!lattice || held.empty()) return;
     pt.cost = std::min(pt.cost, held[w].cost(pt.fs, pt.fd));
     if (opt.global_sm_passes > 0)  // and with Steiglitz-McBride's poles
       pt.cost = std::min(pt.cost, remembered(sm_scored, key, [&] {
@@ -1207,25 +1206,78 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
                            g.set_poles(a);
                            return g.cost(x);
                          }));
-  });
+  };
+  parallel_for(pts.size(), workers,
+               [&](unsigned w, std::size_t k) { score(w, pts[k], k >= local_points); });
+  // The best cells of the coarse lattice again at a quarter of its step: a band that reproduces
+  // the data's slips is a pit about 0.1 % wide, and a lattice point a step away from it often
+  // costs three times as much, so it shows only in a cell's neighbourhood.
+  if (hg > 0 && opt.global_cells > 0) {
+    std::vector<Point> top(pts.begin() + static_cast<std::ptrdiff_t>(local_points), pts.end());
+    const std::size_t cells = std::min(top.size(), opt.global_cells);
+    std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(cells), top.end(),
+                      [](const Point& l, const Point& r) { return l.cost < r.cost; });
+    const std::size_t before = pts.size();
+    for (std::size_t c = 0; c < cells; ++c)
+      for (int i = -2; i <= 2; ++i)
+        for (int j = -2; j <= 2; ++j) {
+          const double fs = top[c].fs + i * hg / 4, fd = top[c].fd + j * hg / 4;
+          if ((i != 0 || j != 0) && fd >= 0.0 && fd <= fs && fs <= width + 1e-9)
+            pts.push_back({0.0, fs, fd});
+        }
+    parallel_for(pts.size() - before, workers,
+                 [&](unsigned w, std::size_t k) { score(w, pts[before + k], true); });
+  }
   // The window's best separate valleys, then the coarse lattice's best ones apart from those.
   auto by_cost = [](const Point& l, const Point& r) { return l.cost < r.cost; };
   const auto local_end = pts.begin() + static_cast<std::ptrdiff_t>(local_points);
   std::sort(pts.begin(), local_end, by_cost);
   std::sort(local_end, pts.end(), by_cost);
   std::vector<Point> starts;
+  // A point joins the starts when it lies `apart` from the ones this call took and beyond the
+  // polish's reach (4 h) of the earlier ones: a lattice point 2 lattice steps from the window's
+  // start (1.07 % on paper Example 1 at noise 1) is a valley of its own, which the window's
+  // polish cannot reach.
+  const double reach = 4 * h;
   auto take = [&](auto from, auto to, std::size_t count, double apart) {
-    const std::size_t limit = starts.size() + count;
+    const std::size_t earlier = starts.size(), limit = starts.size() + count;
     for (auto pt = from; pt != to && starts.size() < limit; ++pt) {
       bool separate = true;
-      for (const Point& st : starts)
-        separate = separate && std::max(std::abs(st.fs - pt->fs), std::abs(st.fd - pt->fd)) > apart;
+      for (std::size_t i = 0; i < starts.size() && separate; ++i) {
+        const Point& st = starts[i];
+        const double d = std::max(std::abs(st.fs - pt->fs), std::abs(st.fd - pt->fd));
+        separate = d > (i < earlier ? reach : apart);
+      }
       if (separate) starts.push_back(*pt);
     }
   };
   take(pts.begin(), local_end, static_cast<std::size_t>(std::max(0, opt.refine_starts)), delta / 2);
   take(local_end, pts.end(), static_cast<std::size_t>(std::max(0, opt.global_starts)),
        std::max(delta / 2, 2 * hg));
+  // A start's poles: of those its lattice point was scored with, the ones that fit best (the
+  // polish that refines them finds a nearby minimum only: from the equation error's poles it lost
+  // a valley that Steiglitz-McBride's had found on paper Example 1 at noise 1 and 2).
+  auto start_poles = [&](HeDataFit& f, const std::vector<double>& x) {
+    std::vector<double> best_a = poles_for(f, x);
+    if (held.empty()) return best_a;
+    std::vector<std::vector<double>> others{a_start};
+    if (opt.global_sm_passes > 0) {
+      f.set_poles(a_start);
+      others.push_back(f.sm_poles(x, opt.global_sm_passes));
+    }
+    f.set_poles(best_a);
+    double best_c = f.cost(x);
+    for (const auto& a : others) {
+      if (a.empty()) continue;
+      f.set_poles(a);
+      const double c = f.cost(x);
+      if (c < best_c) {
+        best_c = c;
+        best_a = a;
+      }
+    }
+    return best_a;
+  };
   // Each start polished by a worker with a fit of its own, from `nk` and `poles` (empty: the
   // start's own); the best in start order wins.
   struct Polished {
@@ -1241,7 +1293,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
       HeDataFit& f = pfits[w];
       Point& cur = out.points[i];
       f.set_delay(nk);
-      out.poles[i] = poles.empty() ? poles_for(f, f.valve(cur.fs, cur.fd)) : poles;
+      out.poles[i] = poles.empty() ? start_poles(f, f.valve(cur.fs, cur.fd)) : poles;
       f.set_poles(out.poles[i]);
       for (int pass = 0; pass < (arx ? opt.refine_passes : 1); ++pass) {
         if (arx) refine_linear(f, f.valve(cur.fs, cur.fd));

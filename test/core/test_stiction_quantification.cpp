@@ -468,13 +468,15 @@ TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window
   }
   std::printf("within 20 %% or 0.5 %% of travel: window alone %d, with the lattice %d of %zu\n",
               ok_window, ok, run);
-  // Measured (Release): 2 and 8 of 12 (7 without Steiglitz-McBride's poles: the integrating loop
-  // stays at fs 21). In each miss the truth, its linear part fitted, fits the data better than
-  // the estimate: the search, not the data, is what is left; there the lattice's points near the
-  // truth cost 3-4 times the truth (its valley is narrower than the lattice step).
+  // Measured (Release): 2 and 11 of 12. Steps: the lattice alone 7; with Steiglitz-McBride's
+  // poles 8 (the integrating loop left fs 21); its best cells at a quarter step 9 (so 8/1.5);
+  // lattice starts beyond the window's polish but within 2 lattice steps of its starts, polished
+  // from the poles that scored them best, 11 (ex1 6/3 at noise 1, 10/2 at noise 2). The miss,
+  // fopdt 8/3: the truth fits the data better than the estimate (cost 2923 against 7185), but
+  // the lattice points near it rank about 1250th of 3080: its pit is narrower than a cell.
 #ifndef VALVEDIAG_SANITIZED
-  CHECK(ok >= 8);
-  CHECK(ok >= ok_window + 5);
+  CHECK(ok >= 11);
+  CHECK(ok >= ok_window + 8);
 #endif
 }
 
