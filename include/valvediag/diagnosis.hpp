@@ -98,6 +98,10 @@ ModelSpec verdict_model(const Diagnosis& d);
 // much, for the reports; "" otherwise.
 std::string held_valve_note(const Finding& f);
 
+// The model-fit options every fit of a diagnosis uses (DiagnoseOptions::fit with its held-out
+// share), for callers that re-examine its fits (band_interval).
+ModelFitOptions fit_options(const DiagnoseOptions& opt);
+
 // One diagnosis of `model` (the last step's findings rank the candidates).
 Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                    const ModelSpec& model, const DiagnoseOptions& opt = {});

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -84,21 +85,28 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name,
 // He's fs and the slip jump of a fitted model's friction, in % of the valve's OP range; NaN when
 // the model has no friction effect. `op`: the data's OP (the Preisach figures probe on it);
 // `pv`: the output the model was fitted to (the Preisach figures are then refined on the data;
-// empty: the probe's figures). `threads`: for the refinement (0: all cores).
+// empty: the probe's figures). `threads`: for the refinement (0: all cores). With `setting`, the
+// sample period and options the model was fitted with, a friction effect's band gets its
+// profile-likelihood interval too (band_interval, model_fit.hpp).
 struct FrictionSize {
   double band_percent = LoopAssessment::kNaN, jump_percent = LoopAssessment::kNaN;
-  // The band's (fs's) interval, for a Preisach valve's refined figures (NaN otherwise).
+  // The band's (fs's) 95 % interval: a Preisach valve's refined figures' (StictionInterval), or
+  // a friction effect's profile likelihood (NaN when not known).
   double band_lo_percent = LoopAssessment::kNaN, band_hi_percent = LoopAssessment::kNaN;
+};
+struct FitSetting {
+  double Ts = 1.0;
+  ModelFitOptions options;
 };
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
                            const std::vector<double>& pv, const OpRange& range = {},
-                           int threads = 0);
+                           int threads = 0, const std::optional<FitSetting>& setting = {});
 // The same for a diagnosis's final model; when the verdict rests on a stick-slip limit cycle
 // and the model has no friction effect, the band is the cycle's apparent stiction (the OP-PV
 // ellipse's width, limit_cycle.hpp) and the jump is unknown (NaN).
 FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
                            const std::vector<double>& pv, const OpRange& range = {},
-                           int threads = 0);
+                           int threads = 0, const std::optional<FitSetting>& setting = {});
 
 // Severity from verdict, stiction size and oscillation: stiction 6, deadband 5,
 // other-nonlinearity 3, no-valve-problem 1, not-enough-data 0, error -1; + 1 when the loop

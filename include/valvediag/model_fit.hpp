@@ -91,6 +91,9 @@ struct ModelFit {
   std::vector<double> y_sim;       // simulated output, whole record
   std::vector<ValveEffect> valve;  // fitted blocks (empty for linear and preisach)
   std::optional<HammersteinModel> preisach;  // the identified Preisach model
+  // The valve parameters' search coordinates at the fit (unit box, effect_estimators.hpp);
+  // empty without valve parameters (linear, preisach).
+  std::vector<double> valve_coordinates;
   int evaluations = 0;  // separable-problem evaluations (each: one valve simulation + grid)
   double elapsed_s = 0.0;
 };
@@ -117,6 +120,24 @@ std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double
 // memory that predicts no movement there earns its held-out score by holding PV still, as a load
 // the controller compensates does too; what it gains over this, its predicted slips explain.
 double held_valve_validation_fitness(const ModelFit& fit, const std::vector<double>& y);
+
+// How well the data fix a fitted friction effect's band (`effect` "stiction": He's fs, Kano's S,
+// Stenman's d; "deadband": d): its profile-likelihood interval. A band is inside when, with the
+// chain's other valve parameters re-fitted, N_eff ln(SSE / best SSE) <= 3.84 (chi-square with one
+// degree of freedom, 95 %) on the estimation part; SSE is the search's simulated-output cost, N_eff
+// the effective sample size of the fit's residual (a slow load's wander is not many proofs).
+// `opt` and the data must be those of the fit. Invalid when the fit has no such effect.
+struct BandInterval {
+  bool valid = false;
+  double lo = std::numeric_limits<double>::quiet_NaN();  // OP units
+  double hi = std::numeric_limits<double>::quiet_NaN();
+  double effective_samples = 0.0;
+  int evaluations = 0;  // separable-problem evaluations it took
+  bool capped = false;  // a side reached its step budget still inside: the range is wider
+};
+BandInterval band_interval(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                           const ModelFit& fit, const std::string& effect,
+                           const ModelFitOptions& opt = {});
 
 // Free parameters `effect` adds to a fitted model: a Preisach valve its nonzero weights, a load
 // one level per knot over the estimation samples, an integrator none (it fixes a pole). Used to

@@ -98,8 +98,9 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     }
     // The stiction size the sweep reports, for one loop without a site config (none when the
     // record cannot be judged).
-    const FrictionSize fr =
-        unusable.empty() ? friction_size(r, d.op, d.pv, range, o.fit.threads) : FrictionSize{};
+    const FrictionSize fr = unusable.empty() ? friction_size(r, d.op, d.pv, range, o.fit.threads,
+                                                             FitSetting{Ts, fit_options(o)})
+                                             : FrictionSize{};
     if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent)) {
       std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%",
                   fr.band_percent, fr.jump_percent);

@@ -14,19 +14,19 @@
 
 namespace valvediag {
 
+ModelFitOptions fit_options(const DiagnoseOptions& opt) {
+  ModelFitOptions fo = opt.fit;
+  if (fo.validation_fraction <= 0 && fo.validation_start == 0)
+    fo.validation_fraction = opt.validation_fraction;
+  return fo;
+}
+
 namespace {
 
 double param(const std::vector<NamedValue>& p, const char* name, double fallback = std::nan("")) {
   for (const auto& v : p)
     if (v.name == name) return v.value;
   return fallback;
-}
-
-ModelFitOptions fit_options(const DiagnoseOptions& opt) {
-  ModelFitOptions fo = opt.fit;
-  if (fo.validation_fraction <= 0 && fo.validation_start == 0)
-    fo.validation_fraction = opt.validation_fraction;
-  return fo;
 }
 
 // One plain line an engineer can act on, with the trial fit's figures.

@@ -432,6 +432,50 @@ void predict_load_on_validation(ModelFit& fit, const std::vector<double>& y, std
   }
 }
 
+// The separable problem fit_model searches for a spec: the linear estimator and the valve's
+// search coordinates. With `order` the extra lag is searched over the base na, nb range (the lag
+// stands for the extra orders there, at a quarter of the cost); the final fit uses the whole
+// range.
+struct Problem {
+  Problem(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+          const ModelSpec& spec, const ModelFitOptions& opt)
+      : lo(linear_options(spec, opt, u.size())),
+        est(y, lo),
+        narrow(narrow_estimator(y, spec, opt, lo)),
+        s(u, narrow ? *narrow : est,
+          InputRange{*std::min_element(u.begin(), u.end()), *std::max_element(u.begin(), u.end()),
+                     Ts}) {
+    for (const auto& e : spec.effects) {
+      const auto c = search_parameters(e, s.range);
+      if (c.empty()) continue;
+      s.effects.push_back(e);
+      s.offset.push_back(s.coords.size());
+      s.coords.insert(s.coords.end(), c.begin(), c.end());
+    }
+    double mean = 0.0, den = 0.0;
+    for (std::size_t t = est.start(); t < est.end(); ++t) mean += y[t];
+    mean /= static_cast<double>(est.end() - est.start());
+    for (std::size_t t = est.start(); t < est.end(); ++t) den += (y[t] - mean) * (y[t] - mean);
+    s.penalty = 10.0 * den + 1.0;  // fitness about -216 %: worse than any stable fit
+    for (std::size_t i = 0; i < s.coords.size(); ++i)
+      if (s.coords[i].profile_points > 0) s.profiled.push_back(i);
+  }
+  static std::optional<ArxEstimator> narrow_estimator(const std::vector<double>& y,
+                                                      const ModelSpec& spec,
+                                                      const ModelFitOptions& opt,
+                                                      const LinearOptions& lo) {
+    if (!spec.has("order")) return std::nullopt;
+    LinearOptions ln = lo;
+    ln.range.na_max = std::min(lo.range.na_max, std::max(opt.structure.na_max, ln.range.na_min));
+    ln.range.nb_max = std::min(lo.range.nb_max, std::max(opt.structure.nb_max, ln.range.nb_min));
+    return ArxEstimator(y, ln);
+  }
+  LinearOptions lo;
+  ArxEstimator est;
+  std::optional<ArxEstimator> narrow;
+  Search s;
+};
+
 ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                       const ModelSpec& spec, const ModelFitOptions& opt, ModelFit fit) {
   const LinearOptions lo = linear_options(spec, opt, u.size());
@@ -616,38 +660,12 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
     return fit;
   }
 
-  const LinearOptions lo = linear_options(spec, opt, u.size());
-  const ArxEstimator est(y, lo);
+  Problem p(u, y, Ts, spec, opt);
+  const LinearOptions& lo = p.lo;
+  const ArxEstimator& est = p.est;
+  Search& s = p.s;
   fit.first_sample = est.start();
   fit.estimation_end = est.end();
-  const auto [umin, umax] = std::minmax_element(u.begin(), u.end());
-  // With `order` the extra lag is searched over the base na, nb range (the lag stands for the
-  // extra orders there, at a quarter of the cost); the final fit uses the whole range.
-  std::optional<ArxEstimator> narrow;
-  if (spec.has("order")) {
-    LinearOptions ln = lo;
-    ln.range.na_max = std::min(lo.range.na_max, std::max(opt.structure.na_max, ln.range.na_min));
-    ln.range.nb_max = std::min(lo.range.nb_max, std::max(opt.structure.nb_max, ln.range.nb_min));
-    narrow.emplace(y, ln);
-  }
-  Search s(u, narrow ? *narrow : est, InputRange{*umin, *umax, Ts});
-  for (const auto& e : spec.effects) {
-    const auto c = search_parameters(e, s.range);
-    if (c.empty()) continue;
-    s.effects.push_back(e);
-    s.offset.push_back(s.coords.size());
-    s.coords.insert(s.coords.end(), c.begin(), c.end());
-  }
-  {
-    double mean = 0.0, den = 0.0;
-    for (std::size_t t = est.start(); t < est.end(); ++t) mean += y[t];
-    mean /= static_cast<double>(est.end() - est.start());
-    for (std::size_t t = est.start(); t < est.end(); ++t) den += (y[t] - mean) * (y[t] - mean);
-    s.penalty = 10.0 * den + 1.0;  // fitness about -216 %: worse than any stable fit
-  }
-
-  for (std::size_t i = 0; i < s.coords.size(); ++i)
-    if (s.coords[i].profile_points > 0) s.profiled.push_back(i);
   std::vector<double> z(s.coords.size(), 0.5);
   fit.status = ModelFitStatus::Converged;
   fit.stop_reason = "no valve parameters to search";
@@ -715,6 +733,7 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
         break;
     }
     fit.evaluations = s.evaluations.load();
+    fit.valve_coordinates = z;
     ValveChain chain = s.chain(z.data());
     fit.valve = chain.effects();
     for (std::size_t k = 0; k < s.effects.size(); ++k) {
@@ -752,6 +771,102 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
   describe_process_effects(fit, &est, Ts);
   finish(fit);
   return fit;
+}
+
+BandInterval band_interval(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                           const ModelFit& fit, const std::string& effect,
+                           const ModelFitOptions& opt) {
+  constexpr double kChiSquare1Dof95 = 3.841;  // 95 % quantile of chi-square with 1 dof
+  constexpr int kMaxSteps = 60, kMisses = 3;
+  BandInterval out;
+  if (fit.valve_coordinates.empty() || u.size() != y.size() ||
+      fit.status == ModelFitStatus::NoStableModel)
+    return out;
+  Problem p(u, y, Ts, fit.spec, opt);
+  Search& s = p.s;
+  if (s.coords.size() != fit.valve_coordinates.size()) return out;
+  std::size_t band = s.coords.size();
+  for (std::size_t k = 0; k < s.effects.size(); ++k)
+    if (s.effects[k].name == effect) band = s.offset[k];
+  if (band == s.coords.size()) return out;
+  const std::vector<double> z0 = fit.valve_coordinates;
+  const double c0 = s.cost(z0.data());
+  {  // the effective sample size of the fit's residual (as widen_unsupported_limits)
+    const std::vector<double> x = s.valve_position(z0.data());
+    const LinearFit f = s.est.fit(x);
+    if (!f.ok || !(c0 > 0)) return out;
+    const std::vector<double> ys = s.est.simulate(f, x);
+    std::vector<double> e;
+    for (std::size_t t = s.est.start(); t < s.est.end(); ++t) e.push_back(y[t] - ys[t]);
+    out.effective_samples = effective_sample_size(e);
+  }
+  for (std::size_t i = 0; i < s.coords.size(); ++i)
+    if (i != band && s.coords[i].profile_points == 0) s.active.push_back(i);
+  // Out from the fit in steps of a twentieth of the band (at least 0.2 % of the box), the other
+  // coordinates re-fitted by Nelder-Mead from the previous point's; a step doubles after 10
+  // points in a row inside, and each side ends after kMisses points in a row outside the
+  // threshold (the cost is rugged: one point outside does not end the band's range) or at the
+  // box's edge.
+  const double v0 = z0[band];
+  struct Point {
+    double v, cost;
+  };
+  std::vector<Point> pts{{v0, c0}};
+  const int before = s.evaluations.load();
+  bool capped = false;
+  for (const double dir : {-1.0, 1.0}) {
+    std::vector<double> z = z0;
+    double v = v0, step = std::max(v0 / 20.0, 0.002);
+    int misses = 0, run = 0, n = 0;
+    for (; n < kMaxSteps && misses < kMisses; ++n) {
+      const double next = std::clamp(v + dir * step, 0.0, 1.0);
+      if (next == v) break;  // the box's edge
+      v = next;
+      s.base = z;
+      s.base[band] = v;
+      double c = 0.0;
+      if (s.active.empty()) {
+        c = s.cost(s.base.data());
+      } else {
+        std::vector<double> za = s.restrict_to_active(s.base);
+        const int evals = opt.local_evaluations > 0 ? opt.local_evaluations
+                                                    : 30 * static_cast<int>(s.active.size());
+        run_nlopt(NLOPT_LN_NELDERMEAD, s, za, evals, 1e-3, &c, 0.05);
+        z = s.full(za.data());
+      }
+      pts.push_back({v, c});
+      if (out.effective_samples * std::log(c / c0) <= kChiSquare1Dof95) {
+        misses = 0;
+        if (++run % 10 == 0) step *= 2;
+      } else {
+        ++misses;
+        run = 0;
+      }
+    }
+    capped = capped || (n == kMaxSteps && misses < kMisses);
+  }
+  out.evaluations = s.evaluations.load() - before;
+  // Inside: within the threshold of the fit's cost, or below it (a band the walk found that
+  // fits better widens the range to it: the fitted band is not better supported than that one);
+  // each end bracketed by the next point out.
+  const double best = c0;
+  std::sort(pts.begin(), pts.end(), [](const Point& a, const Point& b) { return a.v < b.v; });
+  std::size_t first = pts.size(), last = 0;
+  for (std::size_t k = 0; k < pts.size(); ++k)
+    if (out.effective_samples * std::log(pts[k].cost / best) <= kChiSquare1Dof95) {
+      first = std::min(first, k);
+      last = k;
+    }
+  if (first == pts.size()) return out;  // cannot happen: the best point is inside
+  const double lo = pts[first > 0 ? first - 1 : first].v;
+  const double hi = pts[last + 1 < pts.size() ? last + 1 : last].v;
+  const SearchParameter& c = s.coords[band];
+  const double width = c.upper - c.lower;
+  out.lo = c.lower + lo * width;
+  out.hi = c.lower + hi * width;
+  out.capped = capped;
+  out.valid = true;
+  return out;
 }
 
 std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double>& u,

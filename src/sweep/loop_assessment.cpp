@@ -26,7 +26,8 @@ double param(const std::vector<NamedValue>& p, const char* name) {
 // Stenman (d: band, jump d), deadband (d, no jump); a Preisach valve through He's figures fitted
 // to its response on the data's own OP (stiction_quantification.hpp).
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
-                           const std::vector<double>& pv, const OpRange& range, int threads) {
+                           const std::vector<double>& pv, const OpRange& range, int threads,
+                           const std::optional<FitSetting>& setting) {
   const double width = std::max(range.hi - range.lo, 1e-12);
   FrictionSize a;
   if (fit.preisach) {
@@ -68,16 +69,24 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
     a.band_percent = 100.0 * band / width;
     a.jump_percent = 100.0 * jump / width;
     a.band_lo_percent = a.band_hi_percent = LoopAssessment::kNaN;  // not the Preisach valve's
+    if (setting && pv.size() == op.size()) {
+      const BandInterval iv = band_interval(op, pv, setting->Ts, fit, e.name, setting->options);
+      if (iv.valid) {
+        a.band_lo_percent = 100.0 * iv.lo / width;
+        a.band_hi_percent = 100.0 * iv.hi / width;
+      }
+    }
   }
   return a;
 }
 
 FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
-                           const std::vector<double>& pv, const OpRange& range, int threads) {
+                           const std::vector<double>& pv, const OpRange& range, int threads,
+                           const std::optional<FitSetting>& setting) {
   const ValveTravel& t = d.valve_travel;  // measured position: its figures, or no friction
   if (t.decided && t.verdict == "no-valve-problem") return {};
   if (t.decided && std::isfinite(t.fs_percent)) return {t.fs_percent, t.jump_percent};
-  FrictionSize a = friction_size(d.last().fit, op, pv, range, threads);
+  FrictionSize a = friction_size(d.last().fit, op, pv, range, threads, setting);
   if (std::isnan(a.band_percent) && d.whole_record.confirmed) {
     ModelFit whole;  // the friction figures of the whole-record memory fit
     whole.effects = d.whole_record.memory_effects;
@@ -214,7 +223,8 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   } else if (!dg.steps.front().findings.empty() && dg.steps.front().findings.front().supported) {
     a.first_missing = dg.steps.front().findings.front().effect;
   }
-  const FrictionSize fr = friction_size(dg, x.op, x.pv, opt.range, opt.diagnose.fit.threads);
+  const FrictionSize fr = friction_size(dg, x.op, x.pv, opt.range, opt.diagnose.fit.threads,
+                                        FitSetting{x.sample_period(), fit_options(dopt)});
   a.stiction_percent = fr.band_percent;
   a.slip_jump_percent = fr.jump_percent;
   a.stiction_lo_percent = fr.band_lo_percent;

@@ -234,6 +234,24 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   CHECK(j["stiction_percent"].get<double>() == doctest::Approx(8.4).epsilon(0.2));
   CHECK(j["slip_jump_percent"].get<double>() == doctest::Approx(8.4 - 3.52).epsilon(0.3));
   CHECK(r.out.find("stiction:  8.") != std::string::npos);
+  // Those figures came from the recorded valve position. Without it, from the fitted He valve,
+  // with the range of fs the data fit as well (its band's profile likelihood).
+  {
+    const auto n =
+        run("diagnose " + tmp("diag.csv") + " --auto --mv none --json " + tmp("diag-nomv.json"));
+    REQUIRE(n.status == 0);
+    CHECK(n.out.find("as well (95 %)") != std::string::npos);
+    std::ifstream g(tmp("diag-nomv.json"));
+    const auto k = nlohmann::json::parse(g);
+    REQUIRE(k["stiction_lo_percent"].is_number());
+    const double lo = k["stiction_lo_percent"].get<double>();
+    const double fs = k["stiction_percent"].get<double>();
+    const double hi = k["stiction_hi_percent"].get<double>();
+    CHECK(lo <= fs);
+    CHECK(fs <= hi);
+    CHECK(lo <= 8.4);
+    CHECK(8.4 <= hi);
+  }
   // The model's own parameters: OP units, and He's starting motion as a word, not -1/0/1.
   // (No std::regex: GCC 12 warns inside <regex> under the sanitizers' flags.)
   const auto he = r.out.find("           stiction: fs ");

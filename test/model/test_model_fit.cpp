@@ -466,3 +466,53 @@ TEST_CASE("fit_models runs independent fits in parallel with the same results") 
     CHECK(many[k].fitness_percent == doctest::Approx(one.fitness_percent).epsilon(1e-6));
   }
 }
+
+// The band's profile-likelihood interval (band_interval): it holds the fitted band, it holds the
+// true one where the fit found the true valley, and a flat cost (more measurement noise) widens
+// it. It is local: it walks out from the fitted band, so it cannot undo a fit that took another
+// valley (He 5/2 at noise 0.5 and 1 fits fs 10.8 and 9.7, whose intervals exclude 5).
+TEST_CASE("a friction effect's band interval") {
+  struct Case {
+    std::string spec, effect, param;
+    LoopData data;
+    double truth;
+    bool truth_inside;  // measured; the fit found the true valley
+  };
+  std::vector<Case> cases;
+  cases.push_back({"stiction", "stiction", "fs", scenario_data("paper-ex1", 1), 8.4, true});
+  cases.push_back({"stiction:kano", "stiction", "S", scenario_data("kano", 1), 5.0, true});
+  cases.push_back({"stiction:stenman", "stiction", "d", scenario_data("stenman", 1), 3.0, true});
+  cases.push_back({"deadband", "deadband", "d", scenario_data("deadband", 1), 4.0, true});
+  for (double noise : {0.1, 0.5, 1.0, 2.0})
+    cases.push_back({"stiction", "stiction", "fs",
+                     custom_loop({HeStiction(5.0, 2.0)}, noise, false, 7), 5.0, noise < 0.2});
+  std::printf("\nband interval: spec, truth, fitted band, 95 %% interval, N_eff, evaluations\n");
+  std::vector<double> widths;
+  for (const Case& c : cases) {
+    CAPTURE(c.spec);
+    const ModelFitOptions o = split();
+    const ModelFit f = fit(c.data, c.spec, o);
+    const double band = param(f, c.effect, c.param);
+    const BandInterval iv =
+        band_interval(c.data.op, c.data.pv, c.data.sample_period(), f, c.effect, o);
+    REQUIRE(iv.valid);
+    std::printf("%-18s %5.2f %6.3f  %6.3f-%-6.3f %6.0f %4d%s\n", c.spec.c_str(), c.truth, band,
+                iv.lo, iv.hi, iv.effective_samples, iv.evaluations, iv.capped ? " capped" : "");
+    CHECK(iv.lo <= band);
+    CHECK(band <= iv.hi);
+    if (c.truth_inside) {
+      CHECK(iv.lo <= c.truth);
+      CHECK(c.truth <= iv.hi);
+    }
+    widths.push_back(iv.hi - iv.lo);
+  }
+  // Measured: 0.48 wide at noise 0.1, 16 at noise 2 (the fit there says fs 0: the walk finds
+  // bands up to 16 that fit as well or better).
+  CHECK(widths.back() > 10 * widths[4]);
+  // No friction effect, or not the one asked for: no interval.
+  const LoopData& d = cases.front().data;
+  const ModelFit lin = fit(d, "linear", split());
+  CHECK_FALSE(band_interval(d.op, d.pv, d.sample_period(), lin, "stiction", split()).valid);
+  const ModelFit he = fit(d, "stiction", split());
+  CHECK_FALSE(band_interval(d.op, d.pv, d.sample_period(), he, "deadband", split()).valid);
+}

@@ -112,8 +112,9 @@ TEST_CASE("assess_loop: a sticky valve whose OP reverses 3 times is judged and s
 }
 
 // A Preisach valve's size comes from its refined He figures, with the range of fs the data fit
-// as well; a fitted He valve's has no such range (its parameters are the figures).
-TEST_CASE("friction_size: a Preisach valve's band comes with its interval, He's without") {
+// as well; a fitted He valve's range is its band's profile likelihood (band_interval), given the
+// sample period and options it was fitted with.
+TEST_CASE("friction_size: a Preisach valve's band and He's come with their intervals") {
   const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 3000);
   ModelFitOptions o;
   o.structure = {1, 1, 1, 1, 3, 6};
@@ -131,8 +132,16 @@ TEST_CASE("friction_size: a Preisach valve's band comes with its interval, He's 
   const ModelFit he = fit_model(d.op, d.pv, Ts, parse_model_spec("stiction"), o);
   const FrictionSize b = friction_size(he, d.op, d.pv);
   CHECK(b.band_percent == doctest::Approx(8.4).epsilon(0.1));
-  CHECK(std::isnan(b.band_lo_percent));
+  CHECK(std::isnan(b.band_lo_percent));  // without the fit's setting: not known
   CHECK(std::isnan(b.band_hi_percent));
+  const FrictionSize c = friction_size(he, d.op, d.pv, {}, 0, FitSetting{Ts, o});
+  CHECK(c.band_percent == b.band_percent);
+  REQUIRE(std::isfinite(c.band_lo_percent));
+  CHECK(c.band_lo_percent <= c.band_percent);
+  CHECK(c.band_percent <= c.band_hi_percent);
+  CHECK(c.band_lo_percent <= 8.4);
+  CHECK(8.4 <= c.band_hi_percent);
+  CHECK(c.band_hi_percent - c.band_lo_percent < 2.0);
 }
 
 TEST_CASE("results survive their JSON round trip; rank puts the worst valve first") {
