@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <iostream>
 
@@ -113,8 +114,26 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
     where = analyse_residual(d.op, d.pv, f.y_sim, f.first_sample, f.estimation_end, ro);
   }
   std::cout << format_model_fit(f, where, d.t);
+  // How well the data fix a friction band: its 95 % profile-likelihood range (band_interval).
+  nlohmann::json bands = nlohmann::json::array();
+  for (const char* effect : {"stiction", "deadband"}) {
+    if (!spec.has(effect)) continue;
+    const BandInterval iv = band_interval(d.op, d.pv, d.sample_period(), f, effect, mo);
+    if (!iv.valid) continue;
+    std::printf("band:      %s %.3f-%.3f OP within 95 %% (profile likelihood, N_eff %.0f)%s\n",
+                effect, iv.lo, iv.hi, iv.effective_samples,
+                iv.capped ? "; wider still: the walk reached its step budget" : "");
+    bands.push_back({{"effect", effect},
+                     {"lo", iv.lo},
+                     {"hi", iv.hi},
+                     {"level", 0.95},
+                     {"effective_samples", iv.effective_samples},
+                     {"capped", iv.capped}});
+  }
   if (!a.json.empty()) {
-    write_text(a.json, model_fit_json(f, where, d.t).dump(2) + "\n");
+    nlohmann::json j = model_fit_json(f, where, d.t);
+    j["band_intervals"] = bands;
+    write_text(a.json, j.dump(2) + "\n");
     std::cout << "wrote " << a.json << "\n";
   }
   if (!a.series.empty() && f.status != ModelFitStatus::NoStableModel) {

@@ -391,6 +391,16 @@ TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   const auto j1 = nlohmann::json::parse(f1), j2 = nlohmann::json::parse(f2);
   CHECK(j2["model"] == "deadband");
   CHECK(j2["effects"][0]["parameters"]["d"].get<double>() == doctest::Approx(4.0).epsilon(0.25));
+  // With the range of d the data fit as well; the linear model has no band to bound.
+  CHECK(j1["band_intervals"].empty());
+  REQUIRE(j2["band_intervals"].size() == 1);
+  const auto& band = j2["band_intervals"][0];
+  CHECK(band["effect"] == "deadband");
+  CHECK(band["lo"].get<double>() <= j2["effects"][0]["parameters"]["d"].get<double>());
+  CHECK(j2["effects"][0]["parameters"]["d"].get<double>() <= band["hi"].get<double>());
+  CHECK(band["lo"].get<double>() <= 4.0);
+  CHECK(4.0 <= band["hi"].get<double>());
+  CHECK(add.out.find("band:      deadband ") != std::string::npos);
   // The error falls: the effect that is really there raises validation fitness clearly.
   CHECK(j2["validation_fitness_percent"].get<double>() >
         j1["validation_fitness_percent"].get<double>() + 10.0);
