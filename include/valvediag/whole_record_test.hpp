@@ -59,6 +59,7 @@ struct WholeRecordTest {
   // The memoryless effect (or `disturbance`) the record prefers to the memory, "" when none.
   std::string preferred;
   std::vector<FittedEffect> memory_effects;  // the memory model's fitted effects (friction size)
+  std::vector<double> memory_coordinates;    // its valve coordinates (ModelFit, band_interval)
   std::string summary;  // one sentence: what was found and why it counts or not
 };
 

@@ -116,6 +116,7 @@ std::string describe(const ModelFit& base, const ModelFit& mem, const ModelSpec&
   w.memory_fitness = mem.fitness_percent;
   for (const auto& e : mem.effects)
     if (is_memory_effect(e.name)) w.memory_effects.push_back(e);
+  w.memory_coordinates = mem.valve_coordinates;
   const double gain = w.memory_fitness - f0;
   w.relative_gain = gain / std::max(100.0 - f0, 1.0);
   return "on the whole record `" + w.memory_model + "` explains " +

@@ -90,7 +90,15 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
   if (std::isnan(a.band_percent) && d.whole_record.confirmed) {
     ModelFit whole;  // the friction figures of the whole-record memory fit
     whole.effects = d.whole_record.memory_effects;
-    a = friction_size(whole, op, pv, range, threads);
+    std::optional<FitSetting> whole_setting;
+    if (setting && !d.whole_record.memory_coordinates.empty()) {  // and the band's range
+      whole.spec = parse_model_spec(d.whole_record.memory_model);
+      whole.valve_coordinates = d.whole_record.memory_coordinates;
+      whole_setting = setting;
+      whole_setting->options.validation_fraction = 0.0;  // it was fitted to the whole record
+      whole_setting->options.validation_start = 0;
+    }
+    a = friction_size(whole, op, pv, range, threads, whole_setting);
   }
   if (std::isnan(a.band_percent) && verdict(d) == "stiction" && d.limit_cycle.stick_slip)
     a.band_percent = 100.0 * d.limit_cycle.apparent_band / std::max(range.hi - range.lo, 1e-12);

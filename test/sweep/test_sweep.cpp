@@ -18,7 +18,9 @@
 #include <utility>
 
 #include "../../src/cli/isolated_jobs.hpp"
+#include "../common/plant_csv.hpp"
 #include "../common/sqlite_exec.hpp"
+#include "valvediag/csv_reader.hpp"
 #include "valvediag/loop_assessment.hpp"
 #include "valvediag/model_fit.hpp"
 #include "valvediag/model_spec.hpp"
@@ -142,6 +144,25 @@ TEST_CASE("friction_size: a Preisach valve's band and He's come with their inter
   CHECK(c.band_lo_percent <= 8.4);
   CHECK(8.4 <= c.band_hi_percent);
   CHECK(c.band_hi_percent - c.band_lo_percent < 2.0);
+}
+
+// A sticky plant valve that slips once in the held-out tail is judged on the whole record
+// (whole_record_test.hpp); its band comes from that fit, with the fit's range too.
+TEST_CASE("assess_loop: a band found on the whole record comes with its range") {
+  const LoopData d = read_loop_csv(std::string(VALVEDIAG_DATA_DIR) +
+                                       "/plant-loops/stiction/"
+                                       "stic_2411FIC20102_1113_0005_Stick1=0.69853.txt",
+                                   test::plant_csv_options());
+  const LoopAssessment a = assess_loop(d, "FIC20102");
+  INFO(a.reason);
+  REQUIRE(a.verdict == "stiction");
+  CHECK(a.whole_record.confirmed);
+  REQUIRE(std::isfinite(a.stiction_percent));
+  REQUIRE(std::isfinite(a.stiction_lo_percent));
+  CHECK(a.stiction_lo_percent <= a.stiction_percent);
+  CHECK(a.stiction_percent <= a.stiction_hi_percent);
+  // Measured: 1.50 % with 1.35-1.65 %.
+  CHECK(a.stiction_hi_percent - a.stiction_lo_percent < 1.0);
 }
 
 TEST_CASE("results survive their JSON round trip; rank puts the worst valve first") {
