@@ -63,6 +63,10 @@ struct WholeRecordTest {
   std::string summary;  // one sentence: what was found and why it counts or not
 };
 
+// The diagnosis's fit options as the test uses them: without a hold-out (the record is fitted
+// whole). For callers that re-examine its memory fit (band_interval).
+ModelFitOptions whole_record_fit_options(ModelFitOptions fit);
+
 // u: OP, y: PV, Ts: s. `start` is the diagnosis's start model (no valve effect with memory);
 // `fit` the diagnosis's fit options (the hold-out is dropped: the record is fitted whole). The
 // memory candidates are He's, Kano's and Stenman's stiction and backlash (`deadband`); the best

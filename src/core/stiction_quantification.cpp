@@ -1167,8 +1167,14 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // The coarse lattice's bands are also scored with the Preisach valve's poles and with
   // Steiglitz-McBride's from those, the lowest cost kept: far from the probe the equation error's
   // poles can be far off (noise biases them; Steiglitz-McBride's filtering undoes most of that).
-  std::vector<HeDataFit> held(own && hg > 0 ? workers : 0, fit);
+  const bool lattice_scoring = own && hg > 0;
+  std::vector<HeDataFit> held(lattice_scoring ? workers : 0, fit);
   std::vector<HeDataFit> smf(held.size(), fit);
+  // Steiglitz-McBride's poles for x, from the Preisach valve's (empty: none stable).
+  auto sm_poles_for = [&](HeDataFit& g, const std::vector<double>& x) {
+    g.set_poles(a_start);
+    return g.sm_poles(x, opt.global_sm_passes);
+  };
   // Each cost depends on the position alone, so it is remembered by the position's fingerprint:
   // `scored` the own poles' (the interval reuses it), `sm_scored` Steiglitz-McBride's.
   std::unordered_map<std::uint64_t, double> scored, sm_scored;
@@ -1195,13 +1201,12 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
       if (own) f.set_poles(poles_for(f, x));
       return f.cost(x);
     });
-    if (!lattice || held.empty()) return;
+    if (!lattice || !lattice_scoring) return;
     pt.cost = std::min(pt.cost, held[w].cost(pt.fs, pt.fd));
     if (opt.global_sm_passes > 0)  // and with Steiglitz-McBride's poles
       pt.cost = std::min(pt.cost, remembered(sm_scored, key, [&] {
                            HeDataFit& g = smf[w];
-                           g.set_poles(a_start);
-                           const std::vector<double> a = g.sm_poles(x, opt.global_sm_passes);
+                           const std::vector<double> a = sm_poles_for(g, x);
                            if (a.empty()) return std::numeric_limits<double>::infinity();
                            g.set_poles(a);
                            return g.cost(x);
@@ -1259,12 +1264,9 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   // a valley that Steiglitz-McBride's had found on paper Example 1 at noise 1 and 2).
   auto start_poles = [&](HeDataFit& f, const std::vector<double>& x) {
     std::vector<double> best_a = poles_for(f, x);
-    if (held.empty()) return best_a;
+    if (!lattice_scoring) return best_a;
     std::vector<std::vector<double>> others{a_start};
-    if (opt.global_sm_passes > 0) {
-      f.set_poles(a_start);
-      others.push_back(f.sm_poles(x, opt.global_sm_passes));
-    }
+    if (opt.global_sm_passes > 0) others.push_back(sm_poles_for(f, x));
     f.set_poles(best_a);
     double best_c = f.cost(x);
     for (const auto& a : others) {

@@ -12,12 +12,6 @@ namespace valvediag {
 
 namespace {
 
-ModelFitOptions whole(ModelFitOptions fit) {
-  fit.validation_fraction = 0.0;
-  fit.validation_start = 0;
-  return fit;
-}
-
 // Parameters the effects of `fit` add to those of `before`.
 double added_parameters(const ModelFit& fit, const ModelSpec& before, double Ts) {
   double k = 0;
@@ -126,12 +120,18 @@ std::string describe(const ModelFit& base, const ModelFit& mem, const ModelSpec&
 
 }  // namespace
 
+ModelFitOptions whole_record_fit_options(ModelFitOptions fit) {
+  fit.validation_fraction = 0.0;
+  fit.validation_start = 0;
+  return fit;
+}
+
 WholeRecordTest whole_record_test(const std::vector<double>& u, const std::vector<double>& y,
                                   double Ts, const ModelSpec& start, ModelFitOptions fit,
                                   const WholeRecordOptions& opt) {
   WholeRecordTest w;
   if (has_memory_effect(start)) return w;  // the start model has memory already
-  fit = whole(fit);
+  fit = whole_record_fit_options(fit);
   // The trial fits preferred one variant on a part of the record; on the whole record another
   // may explain the slips (a band learnt from one slip), so all are fitted.
   std::vector<ModelSpec> specs{start};

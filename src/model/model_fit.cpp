@@ -300,6 +300,17 @@ std::vector<double> neutral_point(const Search& s) {
 // fitness). The load's error is one slow curve, so the limit must also pass a likelihood-ratio
 // test at 1 % on the effective number of independent residual samples: there it gained a
 // statistic of 2.4-4.9, while each true limit gained over 100.
+// The effective sample size of a fit's simulated residual over the estimation part: a
+// likelihood-ratio test on it does not take a slow load's wander for many proofs. 0 without a fit.
+double residual_samples(const Search& s, const std::vector<double>& y, const std::vector<double>& x,
+                        const LinearFit& f) {
+  if (!f.ok) return 0.0;
+  const std::vector<double> ys = s.est.simulate(f, x);
+  std::vector<double> e;
+  for (std::size_t t = s.est.start(); t < s.est.end(); ++t) e.push_back(y[t] - ys[t]);
+  return effective_sample_size(e);
+}
+
 void widen_unsupported_limits(const Search& s, const std::vector<double>& y,
                               std::vector<double>& z) {
   constexpr double kChiSquare1Dof99 = 6.635;  // 99 % quantile of chi-square with 1 dof
@@ -313,13 +324,7 @@ void widen_unsupported_limits(const Search& s, const std::vector<double>& y,
     const std::size_t lo = s.offset[k], share = lo + 1;  // lower, upper's share of [lower, umax]
     const std::vector<double> x = s.valve_position(z.data());
     const LinearFit kept = s.est.fit(x);
-    double samples = 0.0;  // effective, from the kept model's simulated residual
-    if (kept.ok) {
-      const std::vector<double> ys = s.est.simulate(kept, x);
-      std::vector<double> e;
-      for (std::size_t t = s.est.start(); t < s.est.end(); ++t) e.push_back(y[t] - ys[t]);
-      samples = effective_sample_size(e);
-    }
+    const double samples = residual_samples(s, y, x, kept);
     const auto unsupported = [&](const std::vector<double>& at) {
       const LinearFit f = s.est.fit(s.valve_position(at.data()));
       if (fitness(f) >= fitness(kept) - window) return true;
@@ -442,9 +447,7 @@ struct Problem {
       : lo(linear_options(spec, opt, u.size())),
         est(y, lo),
         narrow(narrow_estimator(y, spec, opt, lo)),
-        s(u, narrow ? *narrow : est,
-          InputRange{*std::min_element(u.begin(), u.end()), *std::max_element(u.begin(), u.end()),
-                     Ts}) {
+        s(u, narrow ? *narrow : est, input_range(u, Ts)) {
     for (const auto& e : spec.effects) {
       const auto c = search_parameters(e, s.range);
       if (c.empty()) continue;
@@ -459,6 +462,10 @@ struct Problem {
     s.penalty = 10.0 * den + 1.0;  // fitness about -216 %: worse than any stable fit
     for (std::size_t i = 0; i < s.coords.size(); ++i)
       if (s.coords[i].profile_points > 0) s.profiled.push_back(i);
+  }
+  static InputRange input_range(const std::vector<double>& u, double Ts) {
+    const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
+    return {*lo, *hi, Ts};
   }
   static std::optional<ArxEstimator> narrow_estimator(const std::vector<double>& y,
                                                       const ModelSpec& spec,
@@ -791,15 +798,17 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
   if (band == s.coords.size()) return out;
   const std::vector<double> z0 = fit.valve_coordinates;
   const double c0 = s.cost(z0.data());
-  {  // the effective sample size of the fit's residual (as widen_unsupported_limits)
+  {
     const std::vector<double> x = s.valve_position(z0.data());
     const LinearFit f = s.est.fit(x);
     if (!f.ok || !(c0 > 0)) return out;
-    const std::vector<double> ys = s.est.simulate(f, x);
-    std::vector<double> e;
-    for (std::size_t t = s.est.start(); t < s.est.end(); ++t) e.push_back(y[t] - ys[t]);
-    out.effective_samples = effective_sample_size(e);
+    out.effective_samples = residual_samples(s, y, x, f);
   }
+  // Inside: within the threshold of the fit's cost, or below it (a band the walk finds that fits
+  // better widens the range to it: the fitted band is not better supported than that one).
+  auto inside = [&](double c) {
+    return out.effective_samples * std::log(c / c0) <= kChiSquare1Dof95;
+  };
   for (std::size_t i = 0; i < s.coords.size(); ++i)
     if (i != band && s.coords[i].profile_points == 0) s.active.push_back(i);
   // Out from the fit in steps of a twentieth of the band (at least 0.2 % of the box), the other
@@ -835,7 +844,7 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
         z = s.full(za.data());
       }
       pts.push_back({v, c});
-      if (out.effective_samples * std::log(c / c0) <= kChiSquare1Dof95) {
+      if (inside(c)) {
         misses = 0;
         if (++run % 10 == 0) step *= 2;
       } else {
@@ -846,18 +855,15 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
     capped = capped || (n == kMaxSteps && misses < kMisses);
   }
   out.evaluations = s.evaluations.load() - before;
-  // Inside: within the threshold of the fit's cost, or below it (a band the walk found that
-  // fits better widens the range to it: the fitted band is not better supported than that one);
-  // each end bracketed by the next point out.
-  const double best = c0;
+  // The inside points' range, each end bracketed by the next point out (the fit's own point is
+  // inside, so there is one).
   std::sort(pts.begin(), pts.end(), [](const Point& a, const Point& b) { return a.v < b.v; });
   std::size_t first = pts.size(), last = 0;
   for (std::size_t k = 0; k < pts.size(); ++k)
-    if (out.effective_samples * std::log(pts[k].cost / best) <= kChiSquare1Dof95) {
+    if (inside(pts[k].cost)) {
       first = std::min(first, k);
       last = k;
     }
-  if (first == pts.size()) return out;  // cannot happen: the best point is inside
   const double lo = pts[first > 0 ? first - 1 : first].v;
   const double hi = pts[last + 1 < pts.size() ? last + 1 : last].v;
   const SearchParameter& c = s.coords[band];

@@ -9,6 +9,7 @@
 #include "valvediag/stiction_quantification.hpp"
 #include "valvediag/valve_travel.hpp"
 #include "valvediag/verdict.hpp"
+#include "valvediag/whole_record_test.hpp"
 
 namespace valvediag {
 
@@ -48,6 +49,7 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
       a.jump_percent = 0.0;
     }
   }
+  std::string sized;  // the effect the band comes from
   for (const auto& e : fit.effects) {
     double band = LoopAssessment::kNaN, jump = LoopAssessment::kNaN;
     if (e.name == "stiction") {
@@ -69,12 +71,13 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
     a.band_percent = 100.0 * band / width;
     a.jump_percent = 100.0 * jump / width;
     a.band_lo_percent = a.band_hi_percent = LoopAssessment::kNaN;  // not the Preisach valve's
-    if (setting && pv.size() == op.size()) {
-      const BandInterval iv = band_interval(op, pv, setting->Ts, fit, e.name, setting->options);
-      if (iv.valid) {
-        a.band_lo_percent = 100.0 * iv.lo / width;
-        a.band_hi_percent = 100.0 * iv.hi / width;
-      }
+    sized = e.name;
+  }
+  if (!sized.empty() && setting && pv.size() == op.size()) {  // the band's range
+    const BandInterval iv = band_interval(op, pv, setting->Ts, fit, sized, setting->options);
+    if (iv.valid) {
+      a.band_lo_percent = 100.0 * iv.lo / width;
+      a.band_hi_percent = 100.0 * iv.hi / width;
     }
   }
   return a;
@@ -94,9 +97,7 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
     if (setting && !d.whole_record.memory_coordinates.empty()) {  // and the band's range
       whole.spec = parse_model_spec(d.whole_record.memory_model);
       whole.valve_coordinates = d.whole_record.memory_coordinates;
-      whole_setting = setting;
-      whole_setting->options.validation_fraction = 0.0;  // it was fitted to the whole record
-      whole_setting->options.validation_start = 0;
+      whole_setting = FitSetting{setting->Ts, whole_record_fit_options(setting->options)};
     }
     a = friction_size(whole, op, pv, range, threads, whole_setting);
   }
