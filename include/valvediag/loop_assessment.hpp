@@ -54,7 +54,8 @@ struct LoopAssessment {
   // The range of fs the data fit as well (95 % profile likelihood, stiction_quantification.hpp),
   // when the size comes from a Preisach valve's refined figures; NaN otherwise.
   double stiction_lo_percent = kNaN, stiction_hi_percent = kNaN;
-  std::string model;  // best model (top of the climbed ladder)
+  bool stiction_hi_open = false;  // hi is the record's OP span: the data do not bound fs above
+  std::string model;              // best model (top of the climbed ladder)
   double fitness_percent = kNaN, validation_fitness_percent = kNaN;
   std::string first_missing;  // the effect the linear model misses first ("" when none)
   std::vector<LadderStep> ladder;
@@ -93,6 +94,9 @@ struct FrictionSize {
   // The band's (fs's) 95 % interval: a Preisach valve's refined figures' (StictionInterval), or
   // a friction effect's profile likelihood (NaN when not known).
   double band_lo_percent = LoopAssessment::kNaN, band_hi_percent = LoopAssessment::kNaN;
+  // The data do not bound the band from above: band_hi_percent is the record's OP span, the
+  // search's top, and the range reads "at least band_lo_percent".
+  bool band_hi_open = false;
 };
 struct FitSetting {
   double Ts = 1.0;

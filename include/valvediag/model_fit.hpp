@@ -134,6 +134,10 @@ struct BandInterval {
   double effective_samples = 0.0;
   int evaluations = 0;  // separable-problem evaluations it took
   bool capped = false;  // a side reached its step budget still inside: the range is wider
+  // The walk up reached the search box's top still inside: the data do not bound the band from
+  // above, and `hi` is the box's top (for a band, the record's OP span: a valve that slipped at
+  // most once or twice). Read the range as "at least lo".
+  bool open_above = false;
 };
 BandInterval band_interval(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                            const ModelFit& fit, const std::string& effect,

@@ -158,6 +158,9 @@ struct StictionInterval {
   double step_percent = 0.0;       // the lattice step: the ends are known to it
   std::size_t points = 0;          // candidates scored
   bool capped = false;             // the point budget stopped the widening: at least this wide
+  // A band within the threshold lies on the lattice's top (the OP span the figures are probed
+  // on): the data do not bound fs from above, and fs_hi is that span.
+  bool fs_open_above = false;
   double level() const { return std::erf(std::sqrt(chi2 / 2)); }  // chi2's probability (0.95)
 };
 

@@ -104,7 +104,12 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent)) {
       std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%",
                   fr.band_percent, fr.jump_percent);
-      if (std::isfinite(fr.band_lo_percent))
+      if (std::isfinite(fr.band_lo_percent) && fr.band_hi_open)
+        std::printf(
+            "; the data fit fs %.2f %% or more as well (95 %%): they do not bound it "
+            "from above, it fits up to the record's OP span, %.2f %%",
+            fr.band_lo_percent, fr.band_hi_percent);
+      else if (std::isfinite(fr.band_lo_percent))
         std::printf("; the data fit fs %.2f-%.2f %% as well (95 %%)", fr.band_lo_percent,
                     fr.band_hi_percent);
       std::printf("\n");
@@ -120,6 +125,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       j["slip_jump_percent"] = number(fr.jump_percent);
       j["stiction_lo_percent"] = number(fr.band_lo_percent);
       j["stiction_hi_percent"] = number(fr.band_hi_percent);
+      j["stiction_hi_open"] = fr.band_hi_open;
       j["analysed_from_s"] = part.from_s;
       j["split_check"] = split_check_json(splits);
       write_text(a->json, j.dump(2) + "\n");

@@ -120,15 +120,23 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
     if (!spec.has(effect)) continue;
     const BandInterval iv = band_interval(d.op, d.pv, d.sample_period(), f, effect, mo);
     if (!iv.valid) continue;
-    std::printf("band:      %s %.3f-%.3f OP within 95 %% (profile likelihood, N_eff %.0f)%s\n",
-                effect, iv.lo, iv.hi, iv.effective_samples,
-                iv.capped ? "; wider still: the walk reached its step budget" : "");
+    if (iv.open_above)
+      std::printf(
+          "band:      %s %.3f OP or more within 95 %% (profile likelihood, N_eff %.0f); "
+          "the data do not bound it from above: it fits up to the record's OP span, "
+          "%.3f\n",
+          effect, iv.lo, iv.effective_samples, iv.hi);
+    else
+      std::printf("band:      %s %.3f-%.3f OP within 95 %% (profile likelihood, N_eff %.0f)%s\n",
+                  effect, iv.lo, iv.hi, iv.effective_samples,
+                  iv.capped ? "; wider still: the walk reached its step budget" : "");
     bands.push_back({{"effect", effect},
                      {"lo", iv.lo},
                      {"hi", iv.hi},
                      {"level", 0.95},
                      {"effective_samples", iv.effective_samples},
-                     {"capped", iv.capped}});
+                     {"capped", iv.capped},
+                     {"open_above", iv.open_above}});
   }
   if (!a.json.empty()) {
     nlohmann::json j = model_fit_json(f, where, d.t);

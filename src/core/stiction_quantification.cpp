@@ -290,8 +290,11 @@ std::string pct(double v, int prec = 1) {
 // "; the data fit fs a-b %, fd c-d % within 95 % (profile likelihood)", or "" without an interval.
 std::string interval_clause(const StictionInterval& iv) {
   if (!iv.valid) return "";
-  return "; the data fit fs " + pct(iv.fs_lo) + "-" + pct(iv.fs_hi) + " %, fd " + pct(iv.fd_lo) +
-         "-" + pct(iv.fd_hi) + " % within " + pct(100 * iv.level(), 0) + " % (profile likelihood" +
+  const std::string fs = iv.fs_open_above ? pct(iv.fs_lo) + " % or more (up to the OP span " +
+                                                pct(iv.fs_hi) + " %: the data do not bound it)"
+                                          : pct(iv.fs_lo) + "-" + pct(iv.fs_hi) + " %";
+  return "; the data fit fs " + fs + ", fd " + pct(iv.fd_lo) + "-" + pct(iv.fd_hi) + " % within " +
+         pct(100 * iv.level(), 0) + " % (profile likelihood" +
          (iv.capped ? ", at least that wide" : "") + ")";
 }
 
@@ -856,6 +859,7 @@ StictionInterval profile_interval(const HeDataFit& fit, Candidate best, const Ow
   // Between lattice points the cost is not known (on simulated loops its valleys are narrower
   // than a step): the ends are bracketed by the next points out.
   iv.fs_lo = std::max(0.0, iv.fs_lo - h);
+  iv.fs_open_above = iv.fs_hi + h >= width - eps;
   iv.fs_hi = std::min(width, iv.fs_hi + h);
   iv.fd_lo = std::max(0.0, iv.fd_lo - h);
   iv.fd_hi = std::min(iv.fs_hi, iv.fd_hi + h);

@@ -871,6 +871,7 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
   out.lo = c.lower + lo * width;
   out.hi = c.lower + hi * width;
   out.capped = capped;
+  out.open_above = pts[last].v >= 1.0;
   out.valid = true;
   return out;
 }

@@ -159,9 +159,12 @@ std::string format_stiction(const StictionQuantification& q) {
   }
   const StictionInterval& iv = q.interval;
   if (iv.valid)
-    o << "           the data fit fs " << num(iv.fs_lo, 2) << "-" << num(iv.fs_hi, 2) << " %, fd "
-      << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within " << num(100 * iv.level(), 0)
-      << " % (profile likelihood, " << num(iv.effective_samples, 0)
+    o << "           the data fit fs "
+      << (iv.fs_open_above ? num(iv.fs_lo, 2) + " % or more (up to the OP span " +
+                                 num(iv.fs_hi, 2) + " %: the data do not bound it)"
+                           : num(iv.fs_lo, 2) + "-" + num(iv.fs_hi, 2) + " %")
+      << ", fd " << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within "
+      << num(100 * iv.level(), 0) << " % (profile likelihood, " << num(iv.effective_samples, 0)
       << " effective samples, lattice step " << num(iv.step_percent, 2) << " %"
       << (iv.capped ? "; at least that wide" : "") << ")\n";
   if (!q.data_given) o << "           (probed over the whole grid: the OP data was not given)\n";
@@ -183,11 +186,17 @@ std::string format_stiction(const StictionQuantification& q) {
 
 nlohmann::json interval_json(const StictionInterval& iv) {
   if (!iv.valid) return nullptr;
-  return {{"fs_lo_percent", iv.fs_lo},   {"fs_hi_percent", iv.fs_hi},
-          {"fd_lo_percent", iv.fd_lo},   {"fd_hi_percent", iv.fd_hi},
-          {"level", iv.level()},         {"effective_samples", iv.effective_samples},
-          {"cost_ratio", iv.cost_ratio}, {"step_percent", iv.step_percent},
-          {"points", iv.points},         {"capped", iv.capped}};
+  return {{"fs_lo_percent", iv.fs_lo},
+          {"fs_hi_percent", iv.fs_hi},
+          {"fd_lo_percent", iv.fd_lo},
+          {"fd_hi_percent", iv.fd_hi},
+          {"level", iv.level()},
+          {"effective_samples", iv.effective_samples},
+          {"cost_ratio", iv.cost_ratio},
+          {"step_percent", iv.step_percent},
+          {"points", iv.points},
+          {"capped", iv.capped},
+          {"fs_open_above", iv.fs_open_above}};
 }
 
 nlohmann::json stiction_json(const StictionQuantification& q) {

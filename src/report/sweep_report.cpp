@@ -38,6 +38,11 @@ std::string fmt(double v, int prec = 1) {
 // " <small>(lo-hi)</small>": the range of fs the data fit as well, when known.
 std::string stiction_range_html(const LoopAssessment& a) {
   if (!std::isfinite(a.stiction_lo_percent) || !std::isfinite(a.stiction_hi_percent)) return "";
+  if (a.stiction_hi_open)  // the data do not bound it from above
+    return " <small title=\"fs the data fit as well (95 % profile likelihood), up to the "
+           "record's OP span " +
+           fmt(a.stiction_hi_percent, 2) + " %\">(&ge; " + fmt(a.stiction_lo_percent, 2) +
+           ")</small>";
   return " <small title=\"fs the data fit as well (95 % profile likelihood)\">(" +
          fmt(a.stiction_lo_percent, 2) + "-" + fmt(a.stiction_hi_percent, 2) + ")</small>";
 }
@@ -74,6 +79,7 @@ json assessment_json(const LoopAssessment& a) {
   j["slip_jump_percent"] = number(a.slip_jump_percent);
   j["stiction_lo_percent"] = number(a.stiction_lo_percent);
   j["stiction_hi_percent"] = number(a.stiction_hi_percent);
+  j["stiction_hi_open"] = a.stiction_hi_open;
   j["model"] = a.model;
   j["fitness_percent"] = number(a.fitness_percent);
   j["validation_fitness_percent"] = number(a.validation_fitness_percent);
@@ -121,6 +127,8 @@ LoopAssessment assessment_from_json(const json& j) {
   a.slip_jump_percent = number_of(j, "slip_jump_percent");
   a.stiction_lo_percent = number_of(j, "stiction_lo_percent");  // NaN in older results
   a.stiction_hi_percent = number_of(j, "stiction_hi_percent");
+  a.stiction_hi_open = j.contains("stiction_hi_open") && j["stiction_hi_open"].is_boolean() &&
+                       j["stiction_hi_open"].get<bool>();
   a.model = text_of(j, "model");
   a.fitness_percent = number_of(j, "fitness_percent");
   a.validation_fitness_percent = number_of(j, "validation_fitness_percent");
@@ -244,7 +252,7 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
   o << "rank,loop,verdict,severity,stiction_percent,slip_jump_percent,model,fitness_percent,"
        "validation_fitness_percent,first_missing,oscillating,period_s,op_reversals_per_hour,"
        "op_travel_percent_per_hour,time_at_limits_percent,samples,source,reason,error,"
-       "valve_travel,split_agreement,stiction_lo_percent,stiction_hi_percent\n";
+       "valve_travel,split_agreement,stiction_lo_percent,stiction_hi_percent,stiction_hi_open\n";
   int rank = 0;
   auto n = [](double v) { return std::isfinite(v) ? fmt(v, 4) : std::string(); };
   for (const auto& a : loops)
@@ -258,7 +266,8 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
       << "," << csv_field(a.reason) << "," << csv_field(a.error) << ","
       << (a.valve_travel.decided ? a.valve_travel.verdict : "") << ","
       << (a.split_verdicts.empty() ? "" : split_agreement_text(a)) << ","
-      << n(a.stiction_lo_percent) << "," << n(a.stiction_hi_percent) << "\n";
+      << n(a.stiction_lo_percent) << "," << n(a.stiction_hi_percent) << ","
+      << (std::isfinite(a.stiction_hi_percent) ? (a.stiction_hi_open ? "1" : "0") : "") << "\n";
   return o.str();
 }
 

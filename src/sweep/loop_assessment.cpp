@@ -43,6 +43,7 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
       if (q.interval.valid) {
         a.band_lo_percent = q.interval.fs_lo * 100.0 / width;
         a.band_hi_percent = q.interval.fs_hi * 100.0 / width;
+        a.band_hi_open = q.interval.fs_open_above;
       }
     } else if (q.valid) {
       a.band_percent = 0.0;
@@ -71,6 +72,7 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
     a.band_percent = 100.0 * band / width;
     a.jump_percent = 100.0 * jump / width;
     a.band_lo_percent = a.band_hi_percent = LoopAssessment::kNaN;  // not the Preisach valve's
+    a.band_hi_open = false;
     sized = e.name;
   }
   if (!sized.empty() && setting && pv.size() == op.size()) {  // the band's range
@@ -78,6 +80,7 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
     if (iv.valid) {
       a.band_lo_percent = 100.0 * iv.lo / width;
       a.band_hi_percent = 100.0 * iv.hi / width;
+      a.band_hi_open = iv.open_above;
     }
   }
   return a;
@@ -238,6 +241,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   a.slip_jump_percent = fr.jump_percent;
   a.stiction_lo_percent = fr.band_lo_percent;
   a.stiction_hi_percent = fr.band_hi_percent;
+  a.stiction_hi_open = fr.band_hi_open;
   a.reason = dg.conclusion;
   if (lead.cut()) {
     std::string s = describe_lead_in(lead, d.t, d.t.front());

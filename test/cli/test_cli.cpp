@@ -251,6 +251,7 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
     CHECK(fs <= hi);
     CHECK(lo <= 8.4);
     CHECK(8.4 <= hi);
+    CHECK(k["stiction_hi_open"] == false);  // the slips bound it: far below the OP span
   }
   // The model's own parameters: OP units, and He's starting motion as a word, not -1/0/1.
   // (No std::regex: GCC 12 warns inside <regex> under the sanitizers' flags.)
@@ -400,6 +401,7 @@ TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   CHECK(j2["effects"][0]["parameters"]["d"].get<double>() <= band["hi"].get<double>());
   CHECK(band["lo"].get<double>() <= 4.0);
   CHECK(4.0 <= band["hi"].get<double>());
+  CHECK(band["open_above"] == false);
   CHECK(add.out.find("band:      deadband ") != std::string::npos);
   // The error falls: the effect that is really there raises validation fitness clearly.
   CHECK(j2["validation_fitness_percent"].get<double>() >

@@ -268,6 +268,7 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
     CHECK(iv.fd_lo <= q.overall.fd_percent);
     CHECK(q.overall.fd_percent <= iv.fd_hi);
     CHECK(iv.fd_hi <= iv.fs_hi);
+    CHECK_FALSE(iv.fs_open_above);  // the slips bound fs: below the OP span
     const bool inside =
         iv.fs_lo <= c.fs && c.fs <= iv.fs_hi && iv.fd_lo <= c.fd && c.fd <= iv.fd_hi;
     covered += inside;

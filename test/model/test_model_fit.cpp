@@ -496,13 +496,15 @@ TEST_CASE("a friction effect's band interval") {
     const BandInterval iv =
         band_interval(c.data.op, c.data.pv, c.data.sample_period(), f, c.effect, o);
     REQUIRE(iv.valid);
-    std::printf("%-18s %5.2f %6.3f  %6.3f-%-6.3f %6.0f %4d%s\n", c.spec.c_str(), c.truth, band,
-                iv.lo, iv.hi, iv.effective_samples, iv.evaluations, iv.capped ? " capped" : "");
+    std::printf("%-18s %5.2f %6.3f  %6.3f-%-6.3f %6.0f %4d%s%s\n", c.spec.c_str(), c.truth, band,
+                iv.lo, iv.hi, iv.effective_samples, iv.evaluations, iv.capped ? " capped" : "",
+                iv.open_above ? " open above" : "");
     CHECK(iv.lo <= band);
     CHECK(band <= iv.hi);
     if (c.truth_inside) {
       CHECK(iv.lo <= c.truth);
       CHECK(c.truth <= iv.hi);
+      CHECK_FALSE(iv.open_above);  // the slips bound the band: far below the OP span
     }
     widths.push_back(iv.hi - iv.lo);
   }

@@ -4,6 +4,7 @@
 #include <sqlite3.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -163,6 +164,32 @@ TEST_CASE("assess_loop: a band found on the whole record comes with its range") 
   CHECK(a.stiction_percent <= a.stiction_hi_percent);
   // Measured: 1.50 % with 1.35-1.65 %.
   CHECK(a.stiction_hi_percent - a.stiction_lo_percent < 1.0);
+  CHECK_FALSE(a.stiction_hi_open);
+}
+
+// A valve that slips about once in the record: its band fits up to the record's OP span, the
+// search's top, so the data bound it from below only and the range says so (stiction_hi_open)
+// instead of passing the span off as an upper bound.
+TEST_CASE("assess_loop: a band the data do not bound from above is open above") {
+  const LoopData d = read_loop_csv(std::string(VALVEDIAG_DATA_DIR) +
+                                       "/plant-loops/stiction/"
+                                       "stic_2411FIC20102_0823_1527_Stick1=0.84495.txt",
+                                   test::plant_csv_options());
+  const LoopAssessment a = assess_loop(d, "FIC20102");
+  INFO(a.reason);
+  REQUIRE(a.verdict == "stiction");
+  REQUIRE(std::isfinite(a.stiction_lo_percent));
+  CHECK(a.stiction_hi_open);
+  // Measured: fs 1.94 % fitted, the data fit 1.84 % or more; OP spans 23.71-25.65 % (the
+  // assessment's range is 0-100 %).
+  const auto [lo, hi] = std::minmax_element(d.op.begin(), d.op.end());
+  CHECK(a.stiction_hi_percent == doctest::Approx(*hi - *lo).epsilon(1e-6));
+  CHECK(a.stiction_lo_percent < a.stiction_hi_percent);
+  CHECK(a.stiction_lo_percent <= a.stiction_percent);
+  const nlohmann::json j = assessment_json(a);
+  CHECK(j["stiction_hi_open"] == true);
+  CHECK(assessment_from_json(j).stiction_hi_open);
+  CHECK(sweep_csv({a}).find(",1\n") != std::string::npos);
 }
 
 TEST_CASE("results survive their JSON round trip; rank puts the worst valve first") {
@@ -174,6 +201,7 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   a.slip_jump_percent = 1.0;
   a.stiction_lo_percent = 2.1;
   a.stiction_hi_percent = 3.25;
+  a.stiction_hi_open = true;
   a.model = "stiction";
   a.fitness_percent = 91.5;
   a.validation_fitness_percent = 88.0;
@@ -208,22 +236,30 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(b.stiction_percent == 2.5);
   CHECK(b.stiction_lo_percent == 2.1);
   CHECK(b.stiction_hi_percent == 3.25);
+  CHECK(b.stiction_hi_open);
   CHECK(b.ladder.size() == 2);
   // Results written before the interval existed read as "not known".
   nlohmann::json older = assessment_json(a);
   older.erase("stiction_lo_percent");
   older.erase("stiction_hi_percent");
+  older.erase("stiction_hi_open");
   const LoopAssessment o = assessment_from_json(older);
   CHECK(std::isnan(o.stiction_lo_percent));
   CHECK(std::isnan(o.stiction_hi_percent));
+  CHECK_FALSE(o.stiction_hi_open);
   CHECK(o.stiction_percent == 2.5);
-  // The CSV carries it in two columns after the ones scripts already read by position.
+  // The CSV carries it in three columns after the ones scripts already read by position.
   const std::string one = sweep_csv({a});
   const std::string header = one.substr(0, one.find('\n'));
-  CHECK(header.size() > 40);
-  CHECK(header.substr(header.size() - 40) == ",stiction_lo_percent,stiction_hi_percent");
-  CHECK(one.find(",2.1000,3.2500\n") != std::string::npos);
-  CHECK(sweep_html({}, {a}, {}).find("(2.10-3.25)") != std::string::npos);
+  CHECK(header.size() > 57);
+  CHECK(header.substr(header.size() - 57) ==
+        ",stiction_lo_percent,stiction_hi_percent,stiction_hi_open");
+  CHECK(one.find(",2.1000,3.2500,1\n") != std::string::npos);
+  CHECK(sweep_html({}, {a}, {}).find("(&ge; 2.10)") != std::string::npos);
+  LoopAssessment bounded = a;  // a range the data bound on both sides
+  bounded.stiction_hi_open = false;
+  CHECK(sweep_html({}, {bounded}, {}).find("(2.10-3.25)") != std::string::npos);
+  CHECK(sweep_csv({bounded}).find(",2.1000,3.2500,0\n") != std::string::npos);
   CHECK(b.ladder[1].validation_fitness_percent == 88.0);
   CHECK(b.health.oscillating);
   CHECK(b.health.period_s == 120);
@@ -316,7 +352,7 @@ TEST_CASE(
   CHECK(table.find(" 2/3\n") != std::string::npos);
   CHECK(table.find("1 loop(s) whose verdict depends on where the record is split") !=
         std::string::npos);
-  CHECK(sweep_csv(v).find(",2/3,,\n") != std::string::npos);
+  CHECK(sweep_csv(v).find(",2/3,,,\n") != std::string::npos);
   const LoopAssessment back =
       assessment_from_json(nlohmann::json::parse(assessment_json(fragile).dump()));
   REQUIRE(back.split_verdicts.size() == 2);
