@@ -174,6 +174,12 @@ struct StictionRegion {
   bool visited = false;      // by the data (true when no data was given: unknown, assumed)
   bool valid = false;        // visited and probed: the figures say something about the valve
   bool stiction = false;     // valid and band above the resolution
+  // The region's fs that the data fit as well (95 %, as StictionInterval): the region's fs walked
+  // out from its refined value, its fd re-fitted near the previous point's, the other regions'
+  // bands and the linear part held. NaN when not refined on data. Regions are equal parts of the
+  // OP range, not of the valve's: a wide range says the data cannot place the band there.
+  double fs_lo = std::numeric_limits<double>::quiet_NaN();
+  double fs_hi = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct StictionQuantification {

@@ -178,7 +178,10 @@ std::string format_stiction(const StictionQuantification& q) {
       o << "no stiction resolved";
     else
       o << "fs " << num(g.figures.fs_percent, 2) << " %, fd " << num(g.figures.fd_percent, 2)
-        << " %";
+        << " %"
+        << (std::isfinite(g.fs_lo)
+                ? " (the data fit fs " + num(g.fs_lo, 2) + "-" + num(g.fs_hi, 2) + " % as well)"
+                : std::string());
     o << "\n";
   }
   return o.str();
@@ -207,6 +210,8 @@ nlohmann::json stiction_json(const StictionQuantification& q) {
                   {"op_hi", g.op_hi},
                   {"fs_percent", number_or_null(g.figures.fs_percent)},
                   {"fd_percent", number_or_null(g.figures.fd_percent)},
+                  {"fs_lo_percent", number_or_null(g.fs_lo)},
+                  {"fs_hi_percent", number_or_null(g.fs_hi)},
                   {"band_percent", number_or_null(g.figures.band_percent)},
                   {"jump_percent", number_or_null(g.figures.jump_percent)},
                   {"visited", g.visited},
