@@ -18,6 +18,7 @@
 
 #include "valvediag/autocorrelation.hpp"
 #include "valvediag/parallel_for.hpp"
+#include "valvediag/profile_walk.hpp"
 
 namespace valvediag {
 namespace {
@@ -870,60 +871,36 @@ StictionInterval profile_interval(const HeDataFit& fit, Candidate best, const Ow
 }
 
 // One region's fs range (StictionRegion::fs_lo, fs_hi): from the refined bands, that region's fs
-// walks out a lattice step at a time (doubling after 10 points in a row inside), its fd the best
-// of the 9 lattice points around the previous point's; a point is inside while
-// N_eff ln(cost / best) <= chi2, and each side ends after 3 points in a row outside or at the
-// lattice's limits. The ends are bracketed by the next points out.
+// walks out from its value (walk_profile, a lattice step first), its fd the best of the 9 lattice
+// points around the previous point's; `limit`: the largest cost inside.
 std::pair<double, double> region_interval(const HeDataFit& fit, const std::vector<Band>& bands,
-                                          int r, double best, double h, double width,
+                                          int r, double best, double limit, double h, double width,
                                           const StictionQuantificationOptions& opt) {
-  constexpr int kMaxSteps = 60, kMisses = 3, kFd = 4;
-  const double n_eff = effective_sample_size(fit.residuals(fit.valve(bands)));
-  const double limit = best * std::exp(opt.interval_chi2 / std::max(n_eff, 1.0));
+  constexpr int kFd = 4;
   const Band b0 = bands[static_cast<std::size_t>(r)];
-  std::vector<std::pair<double, double>> pts{{b0.fs, best}};  // (fs, cost)
   const unsigned workers = worker_count(opt.threads, 2 * kFd + 1);
   std::vector<HeDataFit> fits(workers, fit);
-  for (const double dir : {-1.0, 1.0}) {
-    double fs = b0.fs, fd = b0.fd, step = h;
-    int misses = 0, run = 0;
-    for (int n = 0; n < kMaxSteps && misses < kMisses; ++n) {
-      const double next = std::clamp(fs + dir * step, 0.0, width);
-      if (next == fs) break;  // the lattice's limit
-      fs = next;
-      std::vector<std::vector<Band>> sets;
-      for (int k = -kFd; k <= kFd; ++k) {
-        const double d = std::clamp(fd + k * h, 0.0, fs);
-        if (!sets.empty() && sets.back()[static_cast<std::size_t>(r)].fd == d) continue;
-        sets.push_back(bands);
-        sets.back()[static_cast<std::size_t>(r)] = {fs, d};
-      }
-      std::vector<double> costs(sets.size());
-      parallel_for(sets.size(), workers,
-                   [&](unsigned w, std::size_t i) { costs[i] = fits[w].cost(sets[i]); });
-      const std::size_t k =
-          static_cast<std::size_t>(std::min_element(costs.begin(), costs.end()) - costs.begin());
-      fd = sets[k][static_cast<std::size_t>(r)].fd;
-      pts.push_back({fs, costs[k]});
-      if (costs[k] <= limit) {
-        misses = 0;
-        if (++run % 10 == 0) step *= 2;
-      } else {
-        ++misses;
-        run = 0;
-      }
+  double fd = b0.fd;
+  auto cost = [&](double fs, bool restart) {
+    if (restart) fd = b0.fd;
+    std::vector<std::vector<Band>> sets;
+    for (int k = -kFd; k <= kFd; ++k) {
+      const double d = std::clamp(fd + k * h, 0.0, fs);
+      if (!sets.empty() && sets.back()[static_cast<std::size_t>(r)].fd == d) continue;
+      sets.push_back(bands);
+      sets.back()[static_cast<std::size_t>(r)] = {fs, d};
     }
-  }
-  std::sort(pts.begin(), pts.end());
-  std::size_t first = pts.size(), last = 0;
-  for (std::size_t k = 0; k < pts.size(); ++k)
-    if (pts[k].second <= limit) {
-      first = std::min(first, k);
-      last = k;
-    }
-  if (first == pts.size()) return {b0.fs, b0.fs};  // not reached: the refined point is inside
-  return {pts[first > 0 ? first - 1 : first].first,
-          pts[last + 1 < pts.size() ? last + 1 : last].first};
+    std::vector<double> costs(sets.size());
+    parallel_for(sets.size(), workers,
+                 [&](unsigned w, std::size_t i) { costs[i] = fits[w].cost(sets[i]); });
+    const std::size_t k =
+        static_cast<std::size_t>(std::min_element(costs.begin(), costs.end()) - costs.begin());
+    fd = sets[k][static_cast<std::size_t>(r)].fd;
+    return costs[k];
+  };
+  const ProfileRange range =
+      walk_profile(b0.fs, best, {0.0, width, h}, cost, [limit](double c) { return c <= limit; });
+  return {range.lo, range.hi};
 }
 
 }  // namespace
@@ -1473,6 +1450,12 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
         cost = fit.cost(bands);
       }
     }
+    // The regions' ranges' threshold: N_eff of the residual with every region's band.
+    const double limit =
+        opt.interval
+            ? cost * std::exp(opt.interval_chi2 /
+                              std::max(effective_sample_size(fit.residuals(fit.valve(bands))), 1.0))
+            : 0.0;
     for (int r = 0; r < R; ++r) {
       auto& reg = q.regions[static_cast<std::size_t>(r)];
       if (!reg.valid) continue;
@@ -1480,7 +1463,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
       reg.figures = figures(b.fs, b.fd, cost, fit.var_y());
       reg.stiction = reg.figures.band_percent > 0;
       if (opt.interval) {
-        const auto [lo, hi] = region_interval(fit, bands, r, cost, h, width, opt);
+        const auto [lo, hi] = region_interval(fit, bands, r, cost, limit, h, width, opt);
         reg.fs_lo = lo;
         reg.fs_hi = hi;
       }

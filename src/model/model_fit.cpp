@@ -14,6 +14,7 @@
 #include "valvediag/autocorrelation.hpp"
 #include "valvediag/identification.hpp"
 #include "valvediag/parallel_for.hpp"
+#include "valvediag/profile_walk.hpp"
 
 namespace valvediag {
 
@@ -784,7 +785,6 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
                            const ModelFit& fit, const std::string& effect,
                            const ModelFitOptions& opt) {
   constexpr double kChiSquare1Dof95 = 3.841;  // 95 % quantile of chi-square with 1 dof
-  constexpr int kMaxSteps = 60, kMisses = 3;
   BandInterval out;
   if (fit.valve_coordinates.empty() || u.size() != y.size() ||
       fit.status == ModelFitStatus::NoStableModel)
@@ -812,66 +812,33 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
   for (std::size_t i = 0; i < s.coords.size(); ++i)
     if (i != band && s.coords[i].profile_points == 0) s.active.push_back(i);
   // Out from the fit in steps of a twentieth of the band (at least 0.2 % of the box), the other
-  // coordinates re-fitted by Nelder-Mead from the previous point's; a step doubles after 10
-  // points in a row inside, and each side ends after kMisses points in a row outside the
-  // threshold (the cost is rugged: one point outside does not end the band's range) or at the
-  // box's edge.
+  // coordinates re-fitted by Nelder-Mead from the previous point's (walk_profile: a step doubles
+  // after 10 points in a row inside, and each side ends after 3 points in a row outside the
+  // threshold, as the cost is rugged, or at the box's edge).
   const double v0 = z0[band];
-  struct Point {
-    double v, cost;
-  };
-  std::vector<Point> pts{{v0, c0}};
   const int before = s.evaluations.load();
-  bool capped = false;
-  for (const double dir : {-1.0, 1.0}) {
-    std::vector<double> z = z0;
-    double v = v0, step = std::max(v0 / 20.0, 0.002);
-    int misses = 0, run = 0, n = 0;
-    for (; n < kMaxSteps && misses < kMisses; ++n) {
-      const double next = std::clamp(v + dir * step, 0.0, 1.0);
-      if (next == v) break;  // the box's edge
-      v = next;
-      s.base = z;
-      s.base[band] = v;
-      double c = 0.0;
-      if (s.active.empty()) {
-        c = s.cost(s.base.data());
-      } else {
-        std::vector<double> za = s.restrict_to_active(s.base);
-        const int evals = opt.local_evaluations > 0 ? opt.local_evaluations
-                                                    : 30 * static_cast<int>(s.active.size());
-        run_nlopt(NLOPT_LN_NELDERMEAD, s, za, evals, 1e-3, &c, 0.05);
-        z = s.full(za.data());
-      }
-      pts.push_back({v, c});
-      if (inside(c)) {
-        misses = 0;
-        if (++run % 10 == 0) step *= 2;
-      } else {
-        ++misses;
-        run = 0;
-      }
-    }
-    capped = capped || (n == kMaxSteps && misses < kMisses);
-  }
+  std::vector<double> z;
+  auto cost = [&](double v, bool restart) {
+    if (restart) z = z0;
+    s.base = z;
+    s.base[band] = v;
+    if (s.active.empty()) return s.cost(s.base.data());
+    double c = 0.0;
+    std::vector<double> za = s.restrict_to_active(s.base);
+    const int evals =
+        opt.local_evaluations > 0 ? opt.local_evaluations : 30 * static_cast<int>(s.active.size());
+    run_nlopt(NLOPT_LN_NELDERMEAD, s, za, evals, 1e-3, &c, 0.05);
+    z = s.full(za.data());
+    return c;
+  };
+  const ProfileRange r = walk_profile(v0, c0, {0.0, 1.0, std::max(v0 / 20.0, 0.002)}, cost, inside);
   out.evaluations = s.evaluations.load() - before;
-  // The inside points' range, each end bracketed by the next point out (the fit's own point is
-  // inside, so there is one).
-  std::sort(pts.begin(), pts.end(), [](const Point& a, const Point& b) { return a.v < b.v; });
-  std::size_t first = pts.size(), last = 0;
-  for (std::size_t k = 0; k < pts.size(); ++k)
-    if (inside(pts[k].cost)) {
-      first = std::min(first, k);
-      last = k;
-    }
-  const double lo = pts[first > 0 ? first - 1 : first].v;
-  const double hi = pts[last + 1 < pts.size() ? last + 1 : last].v;
-  const SearchParameter& c = s.coords[band];
-  const double width = c.upper - c.lower;
-  out.lo = c.lower + lo * width;
-  out.hi = c.lower + hi * width;
-  out.capped = capped;
-  out.open_above = pts[last].v >= 1.0;
+  const SearchParameter& par = s.coords[band];
+  const double width = par.upper - par.lower;
+  out.lo = par.lower + r.lo * width;
+  out.hi = par.lower + r.hi * width;
+  out.capped = r.capped;
+  out.open_above = r.open_above;
   out.valid = true;
   return out;
 }

@@ -147,13 +147,15 @@ TEST_CASE("friction_size: a Preisach valve's band and He's come with their inter
   CHECK(c.band_hi_percent - c.band_lo_percent < 2.0);
 }
 
+LoopData sticky_plant_record(const std::string& file) {
+  return read_loop_csv(std::string(VALVEDIAG_DATA_DIR) + "/plant-loops/stiction/" + file,
+                       test::plant_csv_options());
+}
+
 // A sticky plant valve that slips once in the held-out tail is judged on the whole record
 // (whole_record_test.hpp); its band comes from that fit, with the fit's range too.
 TEST_CASE("assess_loop: a band found on the whole record comes with its range") {
-  const LoopData d = read_loop_csv(std::string(VALVEDIAG_DATA_DIR) +
-                                       "/plant-loops/stiction/"
-                                       "stic_2411FIC20102_1113_0005_Stick1=0.69853.txt",
-                                   test::plant_csv_options());
+  const LoopData d = sticky_plant_record("stic_2411FIC20102_1113_0005_Stick1=0.69853.txt");
   const LoopAssessment a = assess_loop(d, "FIC20102");
   INFO(a.reason);
   REQUIRE(a.verdict == "stiction");
@@ -171,10 +173,7 @@ TEST_CASE("assess_loop: a band found on the whole record comes with its range") 
 // search's top, so the data bound it from below only and the range says so (stiction_hi_open)
 // instead of passing the span off as an upper bound.
 TEST_CASE("assess_loop: a band the data do not bound from above is open above") {
-  const LoopData d = read_loop_csv(std::string(VALVEDIAG_DATA_DIR) +
-                                       "/plant-loops/stiction/"
-                                       "stic_2411FIC20102_0823_1527_Stick1=0.84495.txt",
-                                   test::plant_csv_options());
+  const LoopData d = sticky_plant_record("stic_2411FIC20102_0823_1527_Stick1=0.84495.txt");
   const LoopAssessment a = assess_loop(d, "FIC20102");
   INFO(a.reason);
   REQUIRE(a.verdict == "stiction");
