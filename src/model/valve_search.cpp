@@ -77,36 +77,41 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
 }
 
 std::vector<NamedValue> block_parameters(const ValveEffect& block) {
-  return std::visit(Overload{[](const HeStiction& b) -> std::vector<NamedValue> {
-                               return {{"fs", b.fs(), "OP"},
-                                       {"fd", b.fd(), "OP"},
-                                       {"initial_motion", b.initial_motion(), ""}};
-                             },
-                             [](const KanoStiction& b) -> std::vector<NamedValue> {
-                               return {{"S", b.S(), "OP"}, {"J", b.J(), "OP"}};
-                             },
-                             [](const ChoudhuryStiction& b) -> std::vector<NamedValue> {
-                               return {{"S", b.S(), "OP"}, {"J", b.J(), "OP"}};
-                             },
-                             [](const StenmanStiction& b) -> std::vector<NamedValue> {
-                               return {{"d", b.d(), "OP"}};
-                             },
-                             [](const Deadband& b) -> std::vector<NamedValue> {
-                               return {{"d", b.d(), "OP"}};
-                             },
-                             [](const Saturation& b) -> std::vector<NamedValue> {
-                               return {{"lower", b.lower(), "OP"}, {"upper", b.upper(), "OP"}};
-                             },
-                             [](const Characteristic& b) -> std::vector<NamedValue> {
-                               if (b.kind() == Characteristic::Kind::linear)
-                                 return {{"R", 1.0, ""}};
-                               return {{"R", b.rangeability(), ""}};
-                             },
-                             [](const ActuatorLag& b) -> std::vector<NamedValue> {
-                               return {{"tau", b.tau(), "s"}};
-                             },
-                             [](const auto&) -> std::vector<NamedValue> { return {}; }},
-                    block);
+  return std::visit(
+      Overload{[](const HeStiction& b) -> std::vector<NamedValue> {
+                 return {{"fs", b.fs(), "OP"},
+                         {"fd", b.fd(), "OP"},
+                         {"initial_motion", b.initial_motion(), ""}};
+               },
+               [](const KanoStiction& b) -> std::vector<NamedValue> {
+                 return {{"S", b.S(), "OP"}, {"J", b.J(), "OP"}};
+               },
+               [](const ChoudhuryStiction& b) -> std::vector<NamedValue> {
+                 return {{"S", b.S(), "OP"}, {"J", b.J(), "OP"}};
+               },
+               [](const StenmanStiction& b) -> std::vector<NamedValue> {
+                 return {{"d", b.d(), "OP"}};
+               },
+               [](const Deadband& b) -> std::vector<NamedValue> {
+                 return {{"d", b.d(), "OP"}};
+               },
+               [](const Saturation& b) -> std::vector<NamedValue> {
+                 return {{"lower", b.lower(), "OP"}, {"upper", b.upper(), "OP"}};
+               },
+               [](const Characteristic& b) -> std::vector<NamedValue> {
+                 // curvature: ln R, negative for quick-opening (the search's k)
+                 if (b.kind() == Characteristic::Kind::linear)
+                   return {{"R", 1.0, ""}, {"curvature", 0.0, ""}};
+                 const double k = std::log(b.rangeability());
+                 return {
+                     {"R", b.rangeability(), ""},
+                     {"curvature", b.kind() == Characteristic::Kind::quick_opening ? -k : k, ""}};
+               },
+               [](const ActuatorLag& b) -> std::vector<NamedValue> {
+                 return {{"tau", b.tau(), "s"}};
+               },
+               [](const auto&) -> std::vector<NamedValue> { return {}; }},
+      block);
 }
 
 }  // namespace valvediag
