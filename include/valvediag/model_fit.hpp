@@ -29,8 +29,10 @@ enum class GlobalSearch { DirectL, Grid };
 
 struct ModelFitOptions {
   StructureRange structure;  // the base grid (small: every trial fit of `diagnose` pays for it)
-  int delay_nk_max = 30;     // nk range with `delay`
-  int order_max = 4;         // na, nb range with `order`
+  // nk range with `delay`; 0: the longest dead time the record can show, an eighth of the
+  // estimation samples (at least the base grid's nk_max).
+  int delay_nk_max = 0;
+  int order_max = 4;                 // na, nb range with `order`
   double validation_fraction = 0.0;  // last fraction held out (0: none)
   std::size_t validation_start = 0;  // or the first held-out sample (0: use the fraction)
   // Grid: every point of a regular grid (parallel), then a polish from each of the best
@@ -113,6 +115,12 @@ std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector
 // Throws std::invalid_argument when the fit has no model or the record is too short.
 std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double>& u,
                                    const std::vector<double>& y);
+
+// The loop's response time as a prediction horizon, in samples: the fitted dead time plus the
+// time the linear part's step response takes to reach 63 % of its end value (for an integrating
+// model, of its end slope), read within `cap` samples; at least nk + 2, at most `cap`. `cap` when
+// the fit has no linear part.
+std::size_t prediction_horizon(const ModelFit& fit, std::size_t cap);
 
 // The validation fitness (eq 20, held-out part) `fit` would have if its valve stayed, from the
 // first held-out sample on, where the estimation part left it (x_hat held; the linear part, c and

@@ -38,7 +38,7 @@ void check_problem(const std::vector<double>& u, const std::vector<double>& y, d
     throw std::invalid_argument("validation fraction must lie in [0, 0.9)");
   if (opt.validation_start > 0 && opt.validation_start + 10 > u.size())
     throw std::invalid_argument("the validation part starts too close to the end of the data");
-  if (opt.delay_nk_max < opt.structure.nk_max || opt.order_max < 1 ||
+  if ((opt.delay_nk_max != 0 && opt.delay_nk_max < opt.structure.nk_max) || opt.order_max < 1 ||
       (opt.grid_points != 0 && opt.grid_points < 2) || opt.polish_starts < 1 ||
       opt.global_evaluations < 0 || opt.local_evaluations < 0 || !(opt.local_xtol > 0))
     throw std::invalid_argument("model fit options out of range");
@@ -615,6 +615,31 @@ double held_valve_validation_fitness(const ModelFit& fit, const std::vector<doub
   return fitness_percent(y, ys, e0, N);
 }
 
+std::size_t prediction_horizon(const ModelFit& fit, std::size_t cap) {
+  cap = std::max<std::size_t>(cap, 1);
+  if (fit.status == ModelFitStatus::NoStableModel || fit.b.empty()) return cap;
+  const std::size_t nk = static_cast<std::size_t>(std::max(0, fit.structure.nk));
+  // The step response of B/A (of the differenced model when integrating: its slope).
+  const std::size_t na = fit.a.size(), nb = fit.b.size();
+  std::vector<double> s(cap + 1, 0.0);
+  for (std::size_t t = 1; t <= cap; ++t) {
+    double v = 0.0;
+    for (std::size_t i = 1; i <= na && i <= t; ++i) v -= fit.a[i - 1] * s[t - i];
+    for (std::size_t j = 1; j <= nb; ++j)
+      if (t >= nk + j) v += fit.b[j - 1];
+    s[t] = v;
+  }
+  const double end = s[cap];
+  std::size_t t63 = cap;
+  if (std::isfinite(end) && end != 0.0)
+    for (std::size_t t = 1; t <= cap; ++t)
+      if (s[t] / end >= 0.63) {
+        t63 = t;
+        break;
+      }
+  return std::clamp<std::size_t>(t63, std::min(nk + 2, cap), cap);
+}
+
 double effect_parameter_count(const std::string& effect, const ModelFit& fit, double Ts) {
   std::vector<NamedValue> p;
   for (const auto& e : fit.effects)
@@ -631,15 +656,22 @@ double effect_parameter_count(const std::string& effect, const ModelFit& fit, do
   }
   if (effect == "integrator") return 0.0;
   if (effect == "order") return std::max(1.0, param("na", 2) + param("nb", 2) - 3.0);
-  if (effect == "stiction" || effect == "saturation")
-    return static_cast<double>(std::max<std::size_t>(1, p.size()));
+  // Bands and limits; He's motion at the record's start is a profiled state, not a parameter.
+  if (effect == "stiction" || effect == "saturation") {
+    double n = 0.0;
+    for (const auto& v : p) n += v.name != "initial_motion";
+    return std::max(1.0, n);
+  }
   return 1.0;  // deadband, characteristic, actuator-lag, delay
 }
 
 LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, std::size_t N) {
   LinearOptions lo;
   lo.range = opt.structure;
-  if (spec.has("delay")) lo.range.nk_max = opt.delay_nk_max;
+  if (spec.has("delay"))
+    lo.range.nk_max = opt.delay_nk_max > 0 ? opt.delay_nk_max
+                                           : std::max(opt.structure.nk_max,
+                                                      static_cast<int>(estimation_end(N, opt) / 8));
   if (spec.has("order")) {
     lo.range.na_max = std::max(lo.range.na_max, opt.order_max);
     lo.range.nb_max = std::max(lo.range.nb_max, opt.order_max);

