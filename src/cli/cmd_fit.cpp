@@ -98,7 +98,16 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
     std::cout << "note: starting from the last model of this data: " << to_string(spec)
               << (h.empty() ? " (no history yet)" : "") << "\n";
   }
-  for (const auto& e : a.add) spec = add_effect(spec, e);
+  for (const auto& e : a.add) {
+    std::vector<EffectSpec> replaced;
+    spec = add_effect(spec, e, &replaced);
+    if (replaced.empty()) continue;
+    std::string names;  // "stiction", "stiction and deadband"
+    for (std::size_t i = 0; i < replaced.size(); ++i)
+      names += (i ? " and " : "") + to_string(replaced[i]);
+    std::cout << "note: " << to_string(parse_effect(e)) << " replaces " << names
+              << (replaced.size() == 1 ? " (it generalizes it)" : " (it generalizes them)") << "\n";
+  }
   for (const auto& e : a.remove) spec = remove_effect(spec, e);
   if (a.output == "mv")
     throw UsageError("--output mv goes with the Preisach identification, not with --model");
@@ -250,7 +259,8 @@ void add_fit(CLI::App& app, int& exit_code) {
                   "fit this chain of effects, e.g. stiction+saturation, linear")
       ->group(g_e);
   cmd->add_option("--add", a->add,
-                  "add an effect to the last model of this data (see valvediag ladder)")
+                  "add an effect to the last model of this data (see valvediag ladder); "
+                  "preisach replaces stiction or deadband, which it generalizes")
       ->group(g_e);
   cmd->add_option("--remove", a->remove, "remove an effect from the last model of this data")
       ->group(g_e);
