@@ -10,13 +10,21 @@
 
 namespace valvediag {
 
-// `unusable`: why the record cannot be judged (unusable_reason() in loop_health.hpp), "" when it
-// can. A sweep gives such a record `not-enough-data` without fitting it; so does the verdict here,
-// with the reason, while the fits are still shown.
+// The loop's verdict (loop_verdict.hpp decides it) as shown beside a diagnosis, which need not
+// be the analysis it rests on.
+struct VerdictText {
+  std::string verdict;  // the word, printed as given
+  // Why the record cannot be judged (unusable_reason() in loop_health.hpp), "" when it can: the
+  // verdict is then not-enough-data while the fits are still shown.
+  std::string unusable;
+  // What the verdict rests on when it is not the diagnosis shown (one sentence), else "".
+  std::string basis;
+};
 std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
-                             const std::string& unusable = "");
+                             const VerdictText& verdict);
+// `verdict` goes to the key "verdict", its unusable reason to "unusable_reason".
 nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
-                              const std::string& unusable = "");
+                              const VerdictText& verdict);
 // The limit-cycle test's figures (limit_cycle.hpp) as `diagnose --json` and the sweep write them,
 // and back (missing keys keep their defaults).
 nlohmann::json limit_cycle_json(const LimitCycle& c);

@@ -33,6 +33,9 @@ struct ReportContent {
   std::string diagnosis_command;            // how it was run, e.g. "diagnose --auto from linear"
   std::string unusable;  // why a sweep would not judge the record (loop_health.hpp), "" if it
                          // would: the verdict is then not-enough-data, the diagnosis still shown
+  // The loop's verdict (loop_verdict.hpp), shown in the header; "": not judged. verdict_basis:
+  // what it rests on when that is not `diagnosis` (one sentence), else "".
+  std::string verdict, verdict_basis;
   std::vector<HistoryEntry> ladder;     // the data's model history
   std::vector<std::string> notes;       // shown under the header (data notes)
   std::string generated;                // date shown; empty: now (UTC)

@@ -72,7 +72,19 @@ std::string to_string(const EffectSpec& effect);
 
 // The spec with `effect` ("name" or "name:variant") added. Adding an effect that is present with
 // another variant switches the variant; adding one already present as given throws.
-ModelSpec add_effect(const ModelSpec& spec, std::string_view effect);
+// The hysteresis effects nest: `preisach` generalizes `stiction` and `deadband` (the paper's
+// Proposition 1: He's stiction is a Preisach model; so is a backlash), so adding `preisach` to a
+// model with either
+// REPLACES it (both, when both are there); `replaced`, when given, receives what was taken out
+// (empty when nothing was). The other way, adding `stiction` or `deadband` to a model with
+// `preisach`, throws: the wider model covers it already, and swapping to the narrower one is a
+// different model, which the message says how to give (--model with the whole chain).
+// `saturation`, `characteristic` and `actuator-lag` beside `preisach` still throw, as in
+// parse_model_spec: remove them first.
+ModelSpec add_effect(const ModelSpec& spec, std::string_view effect,
+                     std::vector<EffectSpec>* replaced = nullptr);
+// The effects `preisach` replaces when added (stiction, deadband).
+bool preisach_generalizes(std::string_view name);
 // The spec without the effect named (a variant, if given, must match). Throws when absent.
 ModelSpec remove_effect(const ModelSpec& spec, std::string_view effect);
 

@@ -1,7 +1,7 @@
-// The verdict a plant engineer wants first: "stiction", "deadband", "other-nonlinearity" or
-// "no-valve-problem", read from a diagnosis. (The fifth, "not-enough-data", is given before any
-// model is fitted, when the record cannot tell: unusable_reason() in loop_health.hpp, applied by
-// assess_loop() in loop_assessment.hpp.)
+// The rule that reads a verdict from a diagnosis: "stiction", "deadband", "other-nonlinearity" or
+// "no-valve-problem". A loop's verdict is this rule applied to one analysis, loop_verdict() in
+// loop_verdict.hpp, which every command calls; the fifth word, "not-enough-data", is given there
+// before any model is fitted, when the record cannot tell (unusable_reason() in loop_health.hpp).
 //
 // In order of weight:
 //  1. The recorded valve position, when there is one (valve_travel.hpp): friction measured on
@@ -23,8 +23,5 @@
 namespace valvediag {
 
 std::string verdict(const Diagnosis& d);
-// The same, or "not-enough-data" when `unusable` (unusable_reason() of the record) is not empty:
-// what diagnose and report say of a record a sweep would not fit, while showing their fits.
-std::string verdict(const Diagnosis& d, const std::string& unusable);
 
 }  // namespace valvediag

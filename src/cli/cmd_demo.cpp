@@ -16,11 +16,12 @@
 #include "valvediag/diagnosis.hpp"
 #include "valvediag/fit_report.hpp"
 #include "valvediag/html_report.hpp"
+#include "valvediag/loop_verdict.hpp"
 #include "valvediag/model_history.hpp"
 #include "valvediag/recorder.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sim_plc.hpp"
-#include "valvediag/verdict.hpp"
+#include "verdict_output.hpp"
 
 namespace valvediag::cli {
 
@@ -54,46 +55,49 @@ void print_comparison(const FitRun& run) {
               run.result.elapsed_s);
 }
 
-// Diagnosis of the `linear` model (which effect is missing; the model history gets it and the
-// full-grid fit: the ladder) and the HTML report of the full-grid Preisach model. `diagnose
-// --auto` would climb further, but its second step (trial fits on top of a stiction model) costs
-// several times the first.
+// The loop's verdict (loop_verdict.hpp: diagnose --auto from `linear`, as every command gives
+// it), its climb (the model history gets each step and the full-grid fit: the ladder) and the
+// HTML report of the full-grid Preisach model.
 void diagnose_and_report(const LoopData& d, const FitRun& run, const std::string& csv,
                          const std::string& report, bool offline) {
   const double Ts = d.sample_period();
   const std::string step = offline ? "" : "4. ";
   std::cout << "\n"
-            << step << "diagnosing: which effect is missing from `linear` (valvediag diagnose "
-            << csv << ") ..." << std::flush;
+            << step << "diagnosing: which effects `linear` misses (valvediag diagnose " << csv
+            << " --auto) ..." << std::flush;
   const auto t0 = std::chrono::steady_clock::now();
-  Diagnosis diag;
-  std::string no_diagnosis;
-  try {
-    diag = diagnose(d.op, d.pv, Ts, parse_model_spec("linear"));
-  } catch (const std::invalid_argument& e) {
-    // No stable linear model on this record (a short one): the report goes without a diagnosis.
-    no_diagnosis = std::string("The diagnosis could not run: ") + e.what();
-  }
+  // The reason's times on the data's own axis, as `diagnose` of the exported file gives them.
+  VerdictOptions vo;
+  vo.diagnose.time_origin_s = d.t.front();
+  const LoopVerdict lv = loop_verdict(d, vo);
+  const Diagnosis& diag = lv.diagnosis;
   std::vector<HistoryEntry> entries;
-  if (!no_diagnosis.empty()) {
-    std::cout << " not possible\nnote:      " << no_diagnosis << "\n";
+  if (!lv.judged()) {
+    std::cout << " not possible\n";
   } else {
     std::printf(" done in %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    const auto& base = diag.last().fit;
+    const auto& base = diag.steps.front().fit;
     if (std::isfinite(base.fitness_percent))
       std::printf("  linear: %.2f %% estimation, %.2f %% validation; the best trial fits:\n",
                   base.fitness_percent, base.validation_fitness_percent);
     else  // gains are then counted from a fitness of 0 (the mean)
       std::printf("  linear: no stable model on this record; the best trial fits:\n");
-    const auto& findings = diag.last().findings;
+    const auto& findings = diag.steps.front().findings;
     for (std::size_t i = 0; i < findings.size() && i < 3; ++i)
       std::printf("  %zu. + %-15s score %.2f, %+.2f points on validation\n", i + 1,
                   findings[i].effect.c_str(), findings[i].score,
                   findings[i].validation_gain_percent);
-    std::printf("verdict:   %s\n", verdict(diag).c_str());
-    for (const auto& st : diag.steps) entries.push_back(history_entry(st.fit, "demo: diagnose"));
+    for (std::size_t i = 1; i < diag.steps.size(); ++i) {
+      const auto& f = diag.steps[i].fit;
+      std::printf("  climbed to %s: %.2f %% estimation, %.2f %% validation\n",
+                  to_string(f.spec).c_str(), f.fitness_percent, f.validation_fitness_percent);
+    }
+    for (const auto& st : diag.steps)
+      entries.push_back(history_entry(st.fit, "demo: diagnose --auto"));
   }
+  std::cout << verdict_text(lv, false);
+  if (lv.verdict == "error") std::cout << "note:      " << lv.error << "\n";
   const ModelFit fit = model_fit_of(run.result, d.op, d.pv, Ts);
   entries.push_back(history_entry(fit, "demo: fit (paper's full grid)"));
   const std::string history = history_path_for(csv);
@@ -106,12 +110,14 @@ void diagnose_and_report(const LoopData& d, const FitRun& run, const std::string
   c.data_name = csv;
   c.fit = &fit;
   c.where = &where;
-  if (no_diagnosis.empty()) {
+  if (lv.judged()) {
     c.diagnosis = &diag;
-    c.diagnosis_command = "valvediag diagnose " + csv;
-  } else {
-    c.notes.push_back(no_diagnosis);
+    c.diagnosis_command = "valvediag diagnose " + csv + " --auto";
+  } else if (lv.verdict == "error") {
+    c.notes.push_back(lv.error);
   }
+  c.verdict = lv.verdict;
+  c.unusable = lv.verdict == "not-enough-data" ? lv.reason : "";
   c.ladder = load_history(history);
   c.notes.push_back(offline ? "Simulated without the bus (valvediag demo --offline)."
                             : "Recorded through the Modbus TCP driver from a simulated PLC "

@@ -7,9 +7,9 @@
 #include "fit_runner.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
-#include "valvediag/loop_assessment.hpp"
+#include "valvediag/loop_verdict.hpp"
 #include "valvediag/sweep_report.hpp"
-#include "valvediag/verdict.hpp"
+#include "verdict_output.hpp"
 
 namespace valvediag::cli {
 
@@ -21,6 +21,12 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       "with\n"
       "residual tests that point to it. --auto adds the best supported effect while the error "
       "falls.\n"
+      "The verdict is the loop's one verdict, as sweep, report and demo give it: diagnose --auto "
+      "from\n"
+      "linear on the part of the record a sweep analyses. --model, --auto and --candidates choose "
+      "the\n"
+      "diagnosis shown, not the verdict; --validate, --min-gain, --op-range and --keep-lead-in "
+      "apply to both.\n"
       "Examples:\n"
       "  valvediag diagnose loop.csv                        (start from the linear model)\n"
       "  valvediag diagnose loop.csv --model stiction --json diag.json\n"
@@ -80,54 +86,36 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     o.min_gain_percent = a->min_gain;
     o.candidates = a->candidates;
     for (const auto& c : o.candidates) (void)parse_effect(c);  // unknown names are user errors
+    // The loop's verdict, the same for every command: diagnose --auto from linear on the part a
+    // sweep analyses. --model, --auto and --candidates choose the diagnosis shown, not the verdict.
+    VerdictOptions vo =
+        verdict_options(range, a->validate, a->keep_lead_in, whole.t.front(), a->min_gain);
+    vo.check_splits = shares;
+    const LoopVerdict lv = loop_verdict(whole, vo);
+    // That very analysis asked for: shown as it is, not run twice.
+    const bool same = lv.judged() && a->autoclimb && spec.effects.empty() && o.candidates.empty();
     const double Ts = d.sample_period();
-    Diagnosis r = a->autoclimb ? diagnose_auto(d.op, d.pv, d.mv, Ts, spec, o)
-                               : diagnose(d.op, d.pv, d.mv, Ts, spec, o);
-    std::cout << format_diagnosis(r, d.t, unusable);
-    // Not for a record a sweep would not judge: its verdict is not-enough-data at any split.
-    const std::vector<SplitVerdict> splits = unusable.empty()
-                                                 ? split_verdicts(d, o, shares, a->autoclimb, spec)
-                                                 : std::vector<SplitVerdict>{};
-    if (!splits.empty()) {
-      const std::string v = verdict(r, unusable);
+    Diagnosis own;
+    if (!same)
+      own = a->autoclimb ? diagnose_auto(d.op, d.pv, d.mv, Ts, spec, o)
+                         : diagnose(d.op, d.pv, d.mv, Ts, spec, o);
+    const Diagnosis& r = same ? lv.diagnosis : own;
+    const VerdictText vt{lv.verdict, unusable, same ? "" : verdict_basis(lv)};
+    std::cout << format_diagnosis(r, d.t, vt);
+    if (!lv.split_verdicts.empty()) {
       std::cout << "splits:   ";
-      for (const auto& s : splits)
+      for (const auto& s : lv.split_verdicts)
         std::printf(" %s with %.2f held out;", s.verdict.c_str(), s.validate);
-      const auto [agree, of] = split_agreement(v, splits);
-      std::printf(" %d of %d shares give %s\n", agree, of, v.c_str());
+      const auto [agree, of] = split_agreement(lv.verdict, lv.split_verdicts);
+      std::printf(" %d of %d shares give %s\n", agree, of, lv.verdict.c_str());
     }
     // The stiction size the sweep reports, for one loop without a site config (none when the
     // record cannot be judged).
-    const FrictionSize fr = unusable.empty() ? friction_size(r, d.op, d.pv, range, o.fit.threads,
-                                                             FitSetting{Ts, fit_options(o)})
-                                             : FrictionSize{};
-    if (std::isfinite(fr.band_percent) && std::isfinite(fr.jump_percent)) {
-      std::printf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%",
-                  fr.band_percent, fr.jump_percent);
-      if (std::isfinite(fr.band_lo_percent) && fr.band_hi_open)
-        std::printf(
-            "; the data fit fs %.2f %% or more as well (95 %%): they do not bound it "
-            "from above, it fits up to the record's OP span, %.2f %%",
-            fr.band_lo_percent, fr.band_hi_percent);
-      else if (std::isfinite(fr.band_lo_percent))
-        std::printf("; the data fit fs %.2f-%.2f %% as well (95 %%)", fr.band_lo_percent,
-                    fr.band_hi_percent);
-      std::printf("\n");
-    } else if (std::isfinite(fr.band_percent))
-      std::printf("stiction:  %.2f %% of valve travel (apparent, from the limit cycle)\n",
-                  fr.band_percent);
+    std::cout << stiction_text(lv.stiction);
     if (!a->json.empty()) {
-      nlohmann::json j = diagnosis_json(r, d.t, unusable);
-      auto number = [](double v) {
-        return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
-      };
-      j["stiction_percent"] = number(fr.band_percent);
-      j["slip_jump_percent"] = number(fr.jump_percent);
-      j["stiction_lo_percent"] = number(fr.band_lo_percent);
-      j["stiction_hi_percent"] = number(fr.band_hi_percent);
-      j["stiction_hi_open"] = fr.band_hi_open;
+      nlohmann::json j = diagnosis_json(r, d.t, vt);
+      add_verdict_json(j, lv);
       j["analysed_from_s"] = part.from_s;
-      j["split_check"] = split_check_json(splits);
       write_text(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }

@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <optional>
 
 #include "commands.hpp"
 #include "data_options.hpp"
@@ -15,6 +16,7 @@
 #include "valvediag/model_fit.hpp"
 #include "valvediag/model_history.hpp"
 #include "valvediag/residual_analysis.hpp"
+#include "verdict_output.hpp"
 
 namespace valvediag::cli {
 
@@ -33,6 +35,7 @@ struct FitArgs {
   std::string model;  // a composable model instead of the Preisach identification
   std::vector<std::string> add, remove;
   bool no_history = false;
+  bool verdict = false;  // --verdict: the loop's one verdict too (loop_verdict.hpp)
 };
 
 // "0.3": the last 30 % held out; "t=600" or "600s": samples from t >= 600 s held out;
@@ -87,8 +90,8 @@ std::size_t validation_start(LoopData& d, const std::string& spec, FitOptions& f
 }  // namespace
 
 // fit --model/--add/--remove: a composable model, relative to the data's model history.
-int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
-             const std::string& history) {
+int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const std::string& history,
+             const LoopVerdict* lv) {
   ModelSpec spec = parse_model_spec("linear");
   if (!a.model.empty()) {
     spec = parse_model_spec(a.model);
@@ -98,7 +101,16 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
     std::cout << "note: starting from the last model of this data: " << to_string(spec)
               << (h.empty() ? " (no history yet)" : "") << "\n";
   }
-  for (const auto& e : a.add) spec = add_effect(spec, e);
+  for (const auto& e : a.add) {
+    std::vector<EffectSpec> replaced;
+    spec = add_effect(spec, e, &replaced);
+    if (replaced.empty()) continue;
+    std::string names;  // "stiction", "stiction and deadband"
+    for (std::size_t i = 0; i < replaced.size(); ++i)
+      names += (i ? " and " : "") + to_string(replaced[i]);
+    std::cout << "note: " << to_string(parse_effect(e)) << " replaces " << names
+              << (replaced.size() == 1 ? " (it generalizes it)" : " (it generalizes them)") << "\n";
+  }
   for (const auto& e : a.remove) spec = remove_effect(spec, e);
   if (a.output == "mv")
     throw UsageError("--output mv goes with the Preisach identification, not with --model");
@@ -138,9 +150,11 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo,
                      {"capped", iv.capped},
                      {"open_above", iv.open_above}});
   }
+  if (lv) std::cout << verdict_text(*lv, true);
   if (!a.json.empty()) {
     nlohmann::json j = model_fit_json(f, where, d.t);
     j["band_intervals"] = bands;
+    if (lv) add_verdict_json(j, *lv);
     write_text(a.json, j.dump(2) + "\n");
     std::cout << "wrote " << a.json << "\n";
   }
@@ -168,6 +182,8 @@ void add_fit(CLI::App& app, int& exit_code) {
       "  valvediag fit loop.csv --json model.json --series-out series.csv\n"
       "  valvediag fit --db site.sqlite --loop FIC101 --from 600   (a recorded loop)\n"
       "  valvediag fit loop.csv --validate 0.3 --select-on validation\n"
+      "  valvediag fit loop.csv --model stiction --verdict   (and the loop's verdict, as "
+      "diagnose gives it)\n"
       "  valvediag fit export.txt --delimiter tab --skip-lines 2 --skip-after-header 2 \\\n"
       "      --time-format '%Y-%m-%d %H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV'   "
       "(historian export)\n"
@@ -250,13 +266,18 @@ void add_fit(CLI::App& app, int& exit_code) {
                   "fit this chain of effects, e.g. stiction+saturation, linear")
       ->group(g_e);
   cmd->add_option("--add", a->add,
-                  "add an effect to the last model of this data (see valvediag ladder)")
+                  "add an effect to the last model of this data (see valvediag ladder); "
+                  "preisach replaces stiction or deadband, which it generalizes")
       ->group(g_e);
   cmd->add_option("--remove", a->remove, "remove an effect from the last model of this data")
       ->group(g_e);
   cmd->add_flag("--no-history", a->no_history,
                 "do not add this fit to the model history next to the data")
       ->group(g_e);
+  cmd->add_flag("--verdict", a->verdict,
+                "also give the loop's verdict and stiction size, the same as diagnose, report and "
+                "sweep give (diagnose --auto from linear: seconds more; JSON key verdict)")
+      ->group(g_v);
   cmd->add_option("--series-out", a->series, "write t, op, pv, x_hat, pv_sim, residual as CSV")
       ->group(g_v);
 
@@ -266,6 +287,7 @@ void add_fit(CLI::App& app, int& exit_code) {
     if (a->output == "mv" && a->in.csv.mv_column.empty()) a->in.csv.mv_column = "mv";
     LoopData d = load_data(a->in, notes);
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
+    const LoopData whole = a->verdict ? d : LoopData{};  // --validate A:B may cut d below
     FitOptions& fo = a->fit;
     fo.method = a->method == "joint" ? FitMethod::Joint : FitMethod::Alternation;
     fo.stop_rule = a->stop == "cost" ? StopRule::CostDecrease : StopRule::ParameterChange;
@@ -283,10 +305,23 @@ void add_fit(CLI::App& app, int& exit_code) {
       throw UsageError(data_name(a->in) +
                        ": --output mv needs a valve position column (name it with --mv COLUMN)");
     if (auto msg = validate(fo); !msg.empty()) throw UsageError(msg);
+    // The loop's verdict is judged on the whole record with a held-out share, as diagnose and
+    // sweep judge it: --validate's fraction, else their default.
+    std::optional<LoopVerdict> lv;
+    if (a->verdict) {
+      check_identifiable_data(whole, 200, "a verdict");
+      if (fo.validation_fraction <= 0)
+        notes.push_back(
+            "the verdict holds out the last 30 % of the record, as diagnose and sweep do" +
+            std::string(a->validate.empty() ? "" : " (--validate with times is the fit's own)"));
+      const double share = fo.validation_fraction > 0 ? fo.validation_fraction : 0.3;
+      (void)split_check_shares(share, false);  // a share diagnose takes, or a user error
+      lv = loop_verdict(whole, verdict_options(range, share, false, whole.t.front()));
+    }
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     const std::string history = history_path_for(data_name(a->in));
     if (!a->model.empty() || !a->add.empty() || !a->remove.empty()) {
-      exit_code = fit_spec(d, *a, fo, history);
+      exit_code = fit_spec(d, *a, fo, history, lv ? &*lv : nullptr);
       return;
     }
     FitRun run = run_fit(d, fo, a->output, range);
@@ -307,6 +342,10 @@ void add_fit(CLI::App& app, int& exit_code) {
       append_history(history, {h});
     }
     std::cout << run.summary;
+    if (lv) {
+      std::cout << verdict_text(*lv, true);
+      add_verdict_json(run.json, *lv);
+    }
     if (!a->json.empty()) {
       write_text(a->json, run.json.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";

@@ -11,8 +11,9 @@
 #include "data_options.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/html_report.hpp"
+#include "valvediag/loop_verdict.hpp"
 #include "valvediag/model_history.hpp"
-#include "valvediag/verdict.hpp"
+#include "verdict_output.hpp"
 
 namespace valvediag::cli {
 
@@ -76,6 +77,9 @@ void add_report(CLI::App& app, int& exit_code) {
       "and step response of the linear block; where the model fails; the diagnosis; the model\n"
       "ladder. Plots are drawn by gnuplot (Debian package gnuplot-nox; VALVEDIAG_GNUPLOT names\n"
       "another program) and embedded as SVG: the file has no scripts and no external links.\n"
+      "The verdict is the loop's one verdict, as diagnose, sweep and demo give it (diagnose "
+      "--auto\n"
+      "from linear), whatever model is shown; the model history only chooses the model shown.\n"
       "Examples:\n"
       "  valvediag report loop.csv --out report.html          (model: the last of the ladder,\n"
       "                                                        else preisach)\n"
@@ -103,7 +107,8 @@ void add_report(CLI::App& app, int& exit_code) {
       ->group(g)
       ->capture_default_str();
   cmd->add_flag("--no-diagnose", a->no_diagnose,
-                "leave out the diagnosis (trial fits of every missing effect; takes seconds)")
+                "leave out the diagnosis and the verdict (trial fits of every missing effect; "
+                "takes seconds)")
       ->group(g);
   cmd->add_flag("--keep-lead-in", a->keep_lead_in,
                 "fit and diagnose the whole record even when OP holds still for most of it "
@@ -163,14 +168,30 @@ void add_report(CLI::App& app, int& exit_code) {
                 << "\n";
     }
     const double Ts = d.sample_period();
+    std::cout << "fitting " << to_string(*spec)
+              << (a->no_diagnose ? ""
+                                 : " and diagnosing it (trial fits of the missing effects); "
+                                   "the verdict from diagnose --auto")
+              << " ..." << std::endl;
+    // The loop's verdict for the header, the same for every command (loop_verdict.hpp): never
+    // from the model history, which only chose the model shown.
+    LoopVerdict lv;
+    if (!a->no_diagnose)
+      lv = loop_verdict(whole,
+                        verdict_options(range, a->validate, a->keep_lead_in, whole.t.front()));
+    // The model shown is where the verdict's climb ended (a history that diagnose --auto wrote):
+    // that climb is the diagnosis, not run again.
+    const bool same = lv.judged() && lv.diagnosis.last().fit.spec == *spec;
     Diagnosis diag;
     ModelFit fit;
     ResidualAnalysis where;
-    std::cout << "fitting " << to_string(*spec)
-              << (a->no_diagnose ? "" : " and diagnosing it (trial fits of the missing effects)")
-              << " ..." << std::endl;
     bool diagnosed = false;
-    if (!a->no_diagnose) {
+    if (same) {
+      diag = lv.diagnosis;
+      fit = diag.last().fit;
+      where = diag.last().residual;
+      diagnosed = true;
+    } else if (!a->no_diagnose) {
       DiagnoseOptions o;
       o.validation_fraction = a->validate;
       o.valve_travel.op_range = range;
@@ -215,10 +236,13 @@ void add_report(CLI::App& app, int& exit_code) {
     c.where = &where;
     if (diagnosed) {
       c.diagnosis = &diag;
-      c.diagnosis_command = "valvediag diagnose " + name + " --model " + to_string(*spec) +
+      c.diagnosis_command = "valvediag diagnose " + name +
+                            (same ? " --auto" : " --model " + to_string(*spec)) +
                             (a->keep_lead_in ? " --keep-lead-in" : "");
     }
     c.unusable = unusable;
+    c.verdict = lv.verdict;
+    c.verdict_basis = same ? "" : verdict_basis(lv);
     c.ladder = ladder;
     c.notes = notes;
     c.generator = "valvediag report";
@@ -228,10 +252,8 @@ void add_report(CLI::App& app, int& exit_code) {
                   to_string(fit.spec).c_str(), fit.fitness_percent, fit.validation_fitness_percent);
     else
       std::printf("model:     %s: no stable model on this record\n", to_string(fit.spec).c_str());
-    if (diagnosed)
-      std::printf("verdict:   %s%s\n", verdict(diag, unusable).c_str(),
-                  unusable.empty() ? "" : (": " + unusable).c_str());
     std::fflush(stdout);
+    if (!lv.verdict.empty()) std::cout << verdict_text(lv, !same);
     std::cout << report_file_summary(out, r);
     exit_code = kOk;
   });

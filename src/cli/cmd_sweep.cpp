@@ -163,6 +163,7 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
         c.where = &dg.last().residual;
         c.diagnosis = &dg;
         c.diagnosis_command = "valvediag sweep (diagnose --auto from linear)";
+        c.verdict = r.verdict;  // the loop's verdict, of which dg is the analysis
         c.ladder = ladder;
         c.notes = notes;
         c.generator = "valvediag sweep";

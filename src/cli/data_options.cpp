@@ -7,8 +7,8 @@
 
 #include "commands.hpp"
 #include "isolated_mat_reader.hpp"
-#include "valvediag/loop_assessment.hpp"
 #include "valvediag/loop_health.hpp"
+#include "valvediag/loop_verdict.hpp"
 #include "valvediag/mat_reader.hpp"
 
 namespace valvediag::cli {
@@ -171,7 +171,7 @@ AnalysedPart analysed_part(const LoopData& whole, bool keep_lead_in, const OpRan
   // The data check a sweep makes before it fits anything: the same verdict for one loop.
   std::string unusable = unusable_reason(whole, loop_health(whole, range));
   if (!unusable.empty()) notes.push_back("a sweep would not judge this record: " + unusable);
-  AssessOptions as;
+  VerdictOptions as;
   as.keep_lead_in = keep_lead_in;
   as.range = range;
   const QuietLeadIn lead = lead_in_left_out(whole, as, unusable.empty());

@@ -44,7 +44,7 @@ OpRange parse_op_range(const std::string& spec);
 // wrong), "" otherwise.
 std::string op_range_note(const LoopData& d, const OpRange& range, bool given);
 // The part of `whole` that diagnose, report and a sweep analyse: from a little before OP moves
-// when it rests for most of the record (lead_in_left_out() in loop_assessment.hpp), else all of
+// when it rests for most of the record (lead_in_left_out() in loop_verdict.hpp), else all of
 // it; a note in `notes` says where the analysis starts. from_s: that start, s after the record's
 // first sample (0: the whole record). unusable: why a sweep would not judge the record at all
 // (unusable_reason() in loop_health.hpp; "" when it would), also a note: the verdict is then

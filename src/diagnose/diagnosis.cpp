@@ -152,11 +152,15 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     if (!opt.candidates.empty() &&
         std::find(opt.candidates.begin(), opt.candidates.end(), info.name) == opt.candidates.end())
       continue;
+    // On a model with `stiction` or `deadband`, add_effect puts `preisach` in its place: the
+    // wider hysteresis is tried as what the two-parameter friction misses (friction that depends
+    // on the valve position or the direction of travel).
     try {
       trials.push_back(add_effect(model, info.name));
       names.push_back(info.name);
     } catch (const ModelSpecError&) {
-      // Not combinable with this model (e.g. preisach beside another valve effect).
+      // Not combinable with this model: preisach beside saturation, characteristic or
+      // actuator-lag; stiction or deadband on a preisach model, which covers them already.
     }
   }
   // Stiction is tried with He's model and with Kano's and Stenman's: friction models differ in

@@ -39,8 +39,4 @@ std::string verdict(const Diagnosis& d) {
   return from_model == "stiction" || from_model == "deadband" ? "no-valve-problem" : from_model;
 }
 
-std::string verdict(const Diagnosis& d, const std::string& unusable) {
-  return unusable.empty() ? verdict(d) : "not-enough-data";
-}
-
 }  // namespace valvediag

@@ -1,6 +1,7 @@
 #include "valvediag/model_spec.hpp"
 
 #include <algorithm>
+#include <iterator>
 
 namespace valvediag {
 namespace {
@@ -167,17 +168,42 @@ std::string to_string(const ModelSpec& spec) {
   return s;
 }
 
-ModelSpec add_effect(const ModelSpec& spec, std::string_view effect) {
+bool preisach_generalizes(std::string_view name) {
+  return name == "stiction" || name == "deadband";
+}
+
+ModelSpec add_effect(const ModelSpec& spec, std::string_view effect,
+                     std::vector<EffectSpec>* replaced) {
   const EffectSpec e = parse_effect(effect);
+  if (preisach_generalizes(e.name) && spec.has("preisach")) {
+    ModelSpec narrower = spec;
+    for (auto& have : narrower.effects)
+      if (have.name == "preisach") have = e;
+    throw ModelSpecError("'preisach' already covers '" + e.name +
+                         "' (it generalizes stiction and deadband); to fit the narrower model "
+                         "instead, give it whole: --model " +
+                         to_string(normalized(std::move(narrower))));
+  }
   ModelSpec out = spec;
+  std::vector<EffectSpec> gone;
+  if (e.name == "preisach") {
+    // The wider hysteresis model takes the narrower one's place.
+    const auto narrower = [](const EffectSpec& h) { return preisach_generalizes(h.name); };
+    std::copy_if(out.effects.begin(), out.effects.end(), std::back_inserter(gone), narrower);
+    out.effects.erase(std::remove_if(out.effects.begin(), out.effects.end(), narrower),
+                      out.effects.end());
+  }
+  bool switched = false;
   for (auto& have : out.effects) {
     if (have.name != e.name) continue;
     if (have == e) throw ModelSpecError("'" + to_string(e) + "' is already in the model");
     have.variant = e.variant;
-    return normalized(std::move(out));
+    switched = true;
   }
-  out.effects.push_back(e);
-  return normalized(std::move(out));
+  if (!switched) out.effects.push_back(e);
+  out = normalized(std::move(out));
+  if (replaced) *replaced = std::move(gone);
+  return out;
 }
 
 ModelSpec remove_effect(const ModelSpec& spec, std::string_view effect) {

@@ -5,7 +5,6 @@
 #include <sstream>
 
 #include "number_format.hpp"
-#include "valvediag/verdict.hpp"
 
 namespace valvediag {
 
@@ -29,7 +28,7 @@ nlohmann::json num_json(double v) {
 }  // namespace
 
 std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
-                             const std::string& unusable) {
+                             const VerdictText& v) {
   std::ostringstream o;
   if (d.steps.size() > 1) {
     o << "ladder (climbed with --auto):\n";
@@ -95,11 +94,12 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   if (d.limit_cycle.oscillating) o << "limit cycle: " << d.limit_cycle.summary << "\n";
   if (d.whole_record.tested) o << "whole record: " << d.whole_record.summary << "\n";
   if (!d.valve_travel.summary.empty()) o << "valve travel: " << d.valve_travel.summary << "\n";
-  o << "verdict:   " << verdict(d, unusable);
-  if (!unusable.empty())
-    o << ": " << unusable << " (the fits above are shown, not judged; a sweep does not fit such a "
-      << "record)";
+  o << "verdict:   " << v.verdict;
+  if (!v.unusable.empty())
+    o << ": " << v.unusable
+      << " (the fits above are shown, not judged; a sweep does not fit such a record)";
   o << "\n";
+  if (!v.basis.empty()) o << "           " << v.basis << "\n";
   o << d.conclusion << "\n";
   return o.str();
 }
@@ -215,7 +215,7 @@ ValveTravel valve_travel_from_json(const nlohmann::json& j) {
 }
 
 nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
-                              const std::string& unusable) {
+                              const VerdictText& v) {
   using nlohmann::json;
   const auto& s = d.last();
   json j;
@@ -231,8 +231,8 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
     eff.push_back({{"effect", e.name}, {"variant", e.variant}, {"parameters", p}});
   }
   j["effects"] = eff;
-  j["verdict"] = verdict(d, unusable);
-  j["unusable_reason"] = unusable;
+  j["verdict"] = v.verdict;
+  j["unusable_reason"] = v.unusable;
   j["limit_cycle"] = limit_cycle_json(d.limit_cycle);
   j["whole_record"] = whole_record_json(d.whole_record);
   j["valve_travel"] = valve_travel_json(d.valve_travel);

@@ -15,7 +15,6 @@
 #include "number_format.hpp"
 #include "valvediag/fit_report.hpp"
 #include "valvediag/text_stats.hpp"
-#include "valvediag/verdict.hpp"
 
 namespace valvediag {
 
@@ -703,11 +702,6 @@ void record_rows(std::ostringstream& o, const LoopData& d, const std::string& na
   row(o, "sample period Ts", e(num(d.sample_period(), 3)) + " s");
 }
 
-std::string verdict_of(const ReportContent& c) {
-  return c.diagnosis != nullptr && !c.diagnosis->steps.empty() ? verdict(*c.diagnosis, c.unusable)
-                                                               : "";
-}
-
 void header_section(std::ostringstream& o, const ReportContent& c) {
   const LoopData& d = *c.data;
   const ModelFit& f = *c.fit;
@@ -738,14 +732,16 @@ void header_section(std::ostringstream& o, const ReportContent& c) {
                      " %, held out)"
                : std::string("no validation split")) +
           " (simulated output, eq 20)");
-  const std::string v = verdict_of(c);
   row(o, "verdict",
-      v.empty() ? std::string("not diagnosed")
-                : "<span class=\"verdict\">" + e(v) + "</span>" +
-                      (c.unusable.empty() ? std::string()
-                                          : ": " + e(c.unusable) +
-                                                " (the fits are shown, not judged; a sweep does "
-                                                "not fit such a record)"));
+      c.verdict.empty()
+          ? std::string(c.diagnosis != nullptr ? "not judged" : "not diagnosed")
+          : "<span class=\"verdict\">" + e(c.verdict) + "</span>" +
+                (c.unusable.empty() ? std::string()
+                                    : ": " + e(c.unusable) +
+                                          " (the fits are shown, not judged; a sweep does "
+                                          "not fit such a record)") +
+                (c.verdict_basis.empty() ? std::string()
+                                         : "<br><small>" + e(c.verdict_basis) + "</small>"));
   if (c.diagnosis != nullptr && c.diagnosis->limit_cycle.oscillating)
     row(o, "limit cycle", e(c.diagnosis->limit_cycle.summary));
   if (c.diagnosis != nullptr && c.diagnosis->whole_record.tested)
@@ -885,7 +881,8 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
       << e(s.findings.front().effect)
       << "</code>, gains too little to be worth its parameters.</p>\n";
   }
-  o << "<p>Verdict: <span class=\"verdict\">" << e(verdict_of(c)) << "</span>. " << e(d.conclusion)
+  o << "<p>Verdict: <span class=\"verdict\">" << e(c.verdict.empty() ? "not judged" : c.verdict)
+    << "</span>. " << e(c.verdict_basis.empty() ? "" : c.verdict_basis + " ") << e(d.conclusion)
     << "</p>\n</section>\n";
 }
 

@@ -415,3 +415,49 @@ TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   CHECK(run("fit " + tmp("db.csv") + " --remove stiction").status == 2);  // not in the model
   CHECK(run("fit " + tmp("db.csv") + " --add wobble").status == 2);
 }
+
+TEST_CASE("fit --add preisach replaces stiction or deadband and says so") {
+  const std::string csv = tmp("nest.csv");
+  REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --samples 1500 --out " + csv).status == 0);
+  auto st = run("fit " + csv + " --model stiction --add preisach --no-history --json " +
+                tmp("nest.json"));
+  INFO(st.out);
+  CHECK(st.status == 0);
+  CHECK(st.out.find("note: preisach replaces stiction (it generalizes it)\n") != std::string::npos);
+  CHECK(st.out.find("model:     preisach (") != std::string::npos);
+  std::ifstream f(tmp("nest.json"));
+  const auto j = nlohmann::json::parse(f);
+  CHECK(j["model"] == "preisach");
+  CHECK(j["fitness_percent"].get<double>() > 80.0);
+  // A variant is named as given; the rest of the chain stays.
+  auto kano = run("fit " + csv + " --model stiction:kano+delay --add preisach --no-history");
+  INFO(kano.out);
+  CHECK(kano.status == 0);
+  CHECK(kano.out.find("note: preisach replaces stiction:kano (it generalizes it)\n") !=
+        std::string::npos);
+  CHECK(kano.out.find("model:     preisach+delay (") != std::string::npos);
+  auto db = run("fit " + csv + " --model deadband --add preisach --no-history");
+  INFO(db.out);
+  CHECK(db.status == 0);
+  CHECK(db.out.find("note: preisach replaces deadband (it generalizes it)\n") != std::string::npos);
+  CHECK(db.out.find("model:     preisach (") != std::string::npos);
+  // diagnose tries preisach from a friction model the same way: in its place.
+  for (const char* from : {"stiction", "deadband"}) {
+    auto dg = run("diagnose " + csv + " --model " + from +
+                  "+delay --candidates preisach --no-history --json " + tmp("nest-diag.json"));
+    INFO(dg.out);
+    CHECK(dg.status == 0);
+    std::ifstream g(tmp("nest-diag.json"));
+    const auto k = nlohmann::json::parse(g);
+    CHECK(k["model"] == std::string(from) + "+delay");
+    REQUIRE(k["findings"].size() == 1);
+    CHECK(k["findings"][0]["effect"] == "preisach");
+    CHECK(k["findings"][0]["trial_model"] == "preisach+delay");
+  }
+  // The narrower effect on the wider one is refused, naming the chain to give instead.
+  auto narrow = run("fit " + csv + " --model preisach --add stiction --no-history");
+  CHECK(narrow.status == 2);
+  CHECK(narrow.out.find("'preisach' already covers 'stiction' (it generalizes stiction and "
+                        "deadband); to fit the narrower model instead, give it whole: --model "
+                        "stiction") != std::string::npos);
+}

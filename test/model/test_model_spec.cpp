@@ -1,6 +1,7 @@
 #include <doctest/doctest.h>
 
 #include <string>
+#include <vector>
 
 #include "valvediag/model_spec.hpp"
 
@@ -64,7 +65,6 @@ TEST_CASE("effects are added and removed relative to a spec") {
   CHECK(to_string(add_effect(st_sat, "stiction:kano")) == "stiction:kano+saturation");
   CHECK_THROWS_AS(add_effect(st_sat, "stiction"), ModelSpecError);
   CHECK_THROWS_AS(add_effect(st_sat, "friction"), ModelSpecError);
-  CHECK_THROWS_AS(add_effect(st, "preisach"), ModelSpecError);
   CHECK(to_string(remove_effect(st_sat, "stiction")) == "saturation");
   CHECK(to_string(remove_effect(remove_effect(st_sat, "saturation"), "stiction")) == "linear");
   CHECK_THROWS_AS(remove_effect(st_sat, "deadband"), ModelSpecError);
@@ -83,4 +83,63 @@ TEST_CASE("the valve effects with memory are stiction, deadband and preisach") {
   CHECK(has_memory_effect(parse_model_spec("deadband+integrator")));
   CHECK_FALSE(has_memory_effect(parse_model_spec("saturation+characteristic+disturbance")));
   CHECK_FALSE(has_memory_effect(parse_model_spec("linear")));
+}
+
+TEST_CASE("preisach replaces the stiction or deadband it generalizes, and says what it replaced") {
+  std::vector<EffectSpec> replaced;
+  const ModelSpec st = parse_model_spec("stiction:kano+integrator");
+  const ModelSpec pr = add_effect(st, "preisach", &replaced);
+  CHECK(to_string(pr) == "preisach+integrator");
+  REQUIRE(replaced.size() == 1);
+  CHECK(replaced[0].name == "stiction");
+  CHECK(replaced[0].variant == "kano");
+  CHECK(to_string(replaced[0]) == "stiction:kano");
+  // Without the out-parameter, the same spec.
+  CHECK(add_effect(st, "preisach") == pr);
+  CHECK(to_string(add_effect(parse_model_spec("deadband+delay"), "preisach", &replaced)) ==
+        "preisach+delay");
+  REQUIRE(replaced.size() == 1);
+  CHECK(replaced[0].name == "deadband");
+  // Both narrower effects at once go together, in chain order.
+  CHECK(to_string(add_effect(parse_model_spec("stiction+deadband"), "preisach", &replaced)) ==
+        "preisach");
+  REQUIRE(replaced.size() == 2);
+  CHECK(replaced[0].name == "stiction");
+  CHECK(replaced[1].name == "deadband");
+  // Nothing to replace: the list is emptied, not left from the last call.
+  CHECK(to_string(add_effect(parse_model_spec("linear"), "preisach", &replaced)) == "preisach");
+  CHECK(replaced.empty());
+  CHECK(to_string(add_effect(parse_model_spec("stiction"), "saturation", &replaced)) ==
+        "stiction+saturation");
+  CHECK(replaced.empty());
+}
+
+TEST_CASE("preisach beside what it does not generalize, or a narrower effect on preisach, throws") {
+  auto message = [](const char* spec, const char* effect) {
+    try {
+      add_effect(parse_model_spec(spec), effect);
+    } catch (const ModelSpecError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  // The narrower model on the wider one: refused, with the chain to give instead.
+  CHECK(message("preisach+integrator", "stiction") ==
+        "'preisach' already covers 'stiction' (it generalizes stiction and deadband); to fit the "
+        "narrower model instead, give it whole: --model stiction+integrator");
+  CHECK(message("preisach", "deadband").find("--model deadband") != std::string::npos);
+  CHECK(message("preisach", "stiction:stenman").find("--model stiction:stenman") !=
+        std::string::npos);
+  // Stiction replaced, saturation stays: not combinable, and the spec is left as it was.
+  std::vector<EffectSpec> replaced{EffectSpec{"order", ""}};
+  const ModelSpec st_sat = parse_model_spec("stiction+saturation");
+  CHECK_THROWS_AS(add_effect(st_sat, "preisach", &replaced), ModelSpecError);
+  CHECK(message("stiction+saturation", "preisach").find("cannot be combined with 'saturation'") !=
+        std::string::npos);
+  CHECK(replaced.size() == 1);  // untouched when the addition fails
+  CHECK(message("preisach", "preisach") == "'preisach' is already in the model");
+  CHECK(preisach_generalizes("stiction"));
+  CHECK(preisach_generalizes("deadband"));
+  CHECK_FALSE(preisach_generalizes("saturation"));
+  CHECK_FALSE(preisach_generalizes("preisach"));
 }

@@ -406,7 +406,10 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
           std::string::npos);
     const std::string html = read_text(page);
     CHECK((html.find("the analysis starts at t = 5290 s") != std::string::npos) == !keep);
-    CHECK((html.find("--model linear --keep-lead-in") != std::string::npos) == keep);
+    // The diagnose command it quotes: of `linear`, or (with the whole record, where the
+    // verdict's climb ends at `linear`) that climb, --auto, shown rather than run again.
+    CHECK((html.find(keep ? "--auto --keep-lead-in</code>" : "--model linear</code>") !=
+           std::string::npos));
   }
 
   const fs::path pages = kTmp / "pages-rest";

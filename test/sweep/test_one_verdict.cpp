@@ -1,0 +1,227 @@
+// One verdict (issue 33, item 4): every command that gives a loop's verdict calls loop_verdict(),
+// so the same file and options give the same verdict and stiction size from diagnose (with or
+// without --auto, whatever --model), report, sweep and fit --verdict; and a model history on
+// disk never changes it.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "../common/run_cli.hpp"
+#include "valvediag/loop_assessment.hpp"
+#include "valvediag/loop_verdict.hpp"
+#include "valvediag/scenarios.hpp"
+
+using namespace valvediag;
+namespace fs = std::filesystem;
+
+namespace {
+const fs::path kTmp = VALVEDIAG_TMP;
+
+#ifdef VALVEDIAG_SANITIZED
+// A climb runs about ten times slower under the sanitizers (this file took 5 minutes): one record
+// through every command checks the memory; the agreement, the history and loop_verdict itself
+// are measured in Release (report's reuse of the climb runs in sweep --reports' case, and
+// loop_verdict in every assess_loop case).
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
+
+test::CliResult run(const std::vector<std::string>& args) {
+  return test::run_cli(VALVEDIAG_BIN, args, kTmp, 240.0);
+}
+
+nlohmann::json read_json(const std::string& path) {
+  std::ifstream f(path);
+  return nlohmann::json::parse(f);
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream f(path);
+  REQUIRE(f);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+// The word after "verdict:   " in a command's output ("" when there is none).
+std::string verdict_line(const std::string& out) {
+  const std::string key = "verdict:   ";
+  const auto at = out.find(key);
+  if (at == std::string::npos) return "";
+  const auto from = at + key.size();
+  return out.substr(from, out.find_first_of(":\n", from) - from);
+}
+
+// The word in the page's header row.
+std::string page_verdict(const std::string& html) {
+  const std::string key = "<span class=\"verdict\">";
+  const auto at = html.find(key);
+  if (at == std::string::npos) return "";
+  const auto from = at + key.size();
+  return html.substr(from, html.find('<', from) - from);
+}
+
+// A simulated record of 2000 samples with no model history.
+std::string simulated(const std::string& scenario, int seed) {
+  const std::string csv = (kTmp / ("one-" + scenario + ".csv")).string();
+  const test::CliResult s = run({"simulate", "--scenario", scenario, "--seed", std::to_string(seed),
+                                 "--samples", "2000", "--out", csv});
+  REQUIRE(s.status == 0);
+  fs::remove(csv + ".history.json");
+  return csv;
+}
+
+// The same size: both none (null), or equal to print precision.
+bool same_size(const nlohmann::json& a, const nlohmann::json& b, const char* key) {
+  if (a[key].is_null() || b[key].is_null()) return a[key].is_null() && b[key].is_null();
+  return std::abs(a[key].get<double>() - b[key].get<double>()) < 1e-6;
+}
+}  // namespace
+
+// A sticky loop, and an equal-percentage valve whose verdict `report` used to take from the single
+// diagnosis of its model (no-valve-problem) and `diagnose --model stiction` from that model
+// (stiction), while diagnose --auto and sweep climbed to `characteristic` (other-nonlinearity).
+TEST_CASE("one verdict: diagnose, diagnose --auto, report, sweep and fit --verdict agree") {
+  const std::string sticky = simulated("paper-ex1", 1), curved = simulated("characteristic", 1);
+  std::vector<std::string> files{curved};
+  if (!kSanitized) files.push_back(sticky);
+  const std::string sj = (kTmp / "one-sweep.json").string();
+  std::vector<std::string> sweep{"sweep", "--jobs", "2", "--quiet", "--json", sj};
+  sweep.insert(sweep.end(), files.begin(), files.end());
+  const test::CliResult sw = run(sweep);
+  INFO(sw.out);
+  REQUIRE(sw.status == 0);
+  const nlohmann::json swept = read_json(sj);
+
+  for (const std::string& csv : files) {
+    CAPTURE(csv);
+    const nlohmann::json* loop = nullptr;
+    for (const auto& l : swept["loops"])
+      if (l["loop"] == fs::path(csv).stem().string()) loop = &l;
+    REQUIRE(loop != nullptr);
+    const std::string v = (*loop)["verdict"];
+    if (csv == sticky) CHECK(v == "stiction");
+
+    const std::string dj = (kTmp / "one-diag.json").string();
+    const test::CliResult one = run({"diagnose", csv, "--no-history", "--json", dj});
+    INFO(one.out);
+    REQUIRE(one.status == 0);
+    CHECK(verdict_line(one.out) == v);
+    // The diagnosis of `linear` is shown; the verdict says what it rests on.
+    CHECK(one.out.find("The loop's verdict rests on `diagnose --auto` from `linear`, as a sweep "
+                       "runs it, which ends at `" +
+                       (*loop)["model"].get<std::string>() + "`.") != std::string::npos);
+    const nlohmann::json dg = read_json(dj);
+    CHECK(dg["model"] == "linear");
+    CHECK(dg["verdict"] == v);
+    CHECK(dg["verdict_model"] == (*loop)["model"]);
+    CHECK(same_size(dg, *loop, "stiction_percent"));
+    CHECK(same_size(dg, *loop, "stiction_lo_percent"));
+
+    const std::string aj = (kTmp / "one-auto.json").string();
+    const test::CliResult climb = run({"diagnose", csv, "--auto", "--no-history", "--json", aj});
+    INFO(climb.out);
+    REQUIRE(climb.status == 0);
+    CHECK(verdict_line(climb.out) == v);
+    CHECK(climb.out.find("The loop's verdict rests on") == std::string::npos);  // it is this one
+    const nlohmann::json au = read_json(aj);
+    CHECK(au["verdict"] == v);
+    CHECK(au["model"] == (*loop)["model"]);
+
+    const std::string page = (kTmp / "one-report.html").string();
+    const test::CliResult rep = run({"report", csv, "--no-plots", "--no-history", "--out", page});
+    INFO(rep.out);
+    REQUIRE(rep.status == 0);
+    CHECK(rep.out.find("note: model preisach (no model history for this data yet)") !=
+          std::string::npos);
+    CHECK(verdict_line(rep.out) == v);
+    CHECK(page_verdict(read_text(page)) == v);
+
+    const std::string fj = (kTmp / "one-fit.json").string();
+    const test::CliResult fit =
+        run({"fit", csv, "--model", "linear", "--verdict", "--no-history", "--json", fj});
+    INFO(fit.out);
+    REQUIRE(fit.status == 0);
+    CHECK(verdict_line(fit.out) == v);
+    const nlohmann::json fd = read_json(fj);
+    CHECK(fd["model"] == "linear");
+    CHECK(fd["verdict"] == v);
+    CHECK(same_size(fd, *loop, "stiction_percent"));
+    if (csv == sticky) {
+      CHECK((*loop)["stiction_percent"].get<double>() == doctest::Approx(8.4).epsilon(0.2));
+      CHECK(one.out.find("stiction:  8.") != std::string::npos);
+    } else {
+      // A model with stiction shown (on a few candidates): the verdict is still the loop's.
+      const test::CliResult st =
+          run({"diagnose", csv, "--model", "stiction", "--candidates", "delay", "--no-history"});
+      INFO(st.out);
+      REQUIRE(st.status == 0);
+      CHECK(st.out.find("model:     stiction (") != std::string::npos);
+      CHECK(verdict_line(st.out) == v);
+    }
+  }
+}
+
+// report takes the model it shows from the data's history; it used to diagnose that model alone
+// and read the verdict from it, so a history written by fit or diagnose changed the verdict
+// (on this record: no-valve-problem, then other-nonlinearity once diagnose --auto had written
+// `characteristic`).
+TEST_CASE("one verdict: a model history on disk does not change report's verdict" *
+          doctest::skip(kSanitized)) {
+  const std::string csv = simulated("characteristic", 1);
+  const std::string page = (kTmp / "one-history.html").string();
+  auto report = [&](const std::string& model_note) {
+    // --no-history: the report reads the history, it does not add to it here.
+    const test::CliResult r = run({"report", csv, "--no-plots", "--no-history", "--out", page});
+    INFO(r.out);
+    REQUIRE(r.status == 0);
+    CHECK(r.out.find(model_note) != std::string::npos);
+    CHECK(page_verdict(read_text(page)) == verdict_line(r.out));
+    return verdict_line(r.out);
+  };
+  const std::string first = report("note: model preisach (no model history for this data yet)");
+  REQUIRE(!first.empty());
+  REQUIRE(!fs::exists(csv + ".history.json"));
+
+  const test::CliResult fit = run({"fit", csv, "--model", "preisach"});
+  REQUIRE(fit.status == 0);
+  REQUIRE(fs::exists(csv + ".history.json"));
+  CHECK(report("note: model preisach (the last model of this data's ladder)") == first);
+
+  const test::CliResult climb = run({"diagnose", csv, "--auto"});
+  INFO(climb.out);
+  REQUIRE(climb.status == 0);
+  const std::string top = read_json(csv + ".history.json")["entries"].back()["model"];
+  CHECK(report("note: model " + top + " (the last model of this data's ladder)") == first);
+  // That model is where the verdict's climb ended: the page shows that climb, not a rerun.
+  CHECK(read_text(page).find("valvediag diagnose " + csv + " --auto") != std::string::npos);
+  CHECK(verdict_line(climb.out) == first);
+}
+
+TEST_CASE("one verdict: loop_verdict is the sweep's assessment and ignores a command's choices" *
+          doctest::skip(kSanitized)) {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 1500);
+  const LoopVerdict v = loop_verdict(d);
+  REQUIRE(v.judged());
+  CHECK(v.verdict == "stiction");
+  CHECK(v.model == to_string(v.diagnosis.last().fit.spec));
+  const LoopAssessment a = assess_loop(d, "FIC101");
+  CHECK(a.verdict == v.verdict);
+  CHECK(a.model == v.model);
+  CHECK(a.stiction_percent == doctest::Approx(v.stiction.band_percent));
+  CHECK(a.reason == v.reason);
+  // The candidates a diagnosis shows do not narrow the verdict's climb; the reason's times
+  // count from the caller's origin.
+  VerdictOptions o;
+  o.diagnose.candidates = {"delay"};
+  o.diagnose.time_origin_s = 1000.0;
+  const LoopVerdict w = loop_verdict(d, o);
+  CHECK(w.verdict == v.verdict);
+  CHECK(w.model == v.model);
+  CHECK(w.stiction.band_percent == doctest::Approx(v.stiction.band_percent));
+}
