@@ -57,17 +57,8 @@ std::string case_line(const BenchmarkOutcome& o) {
                      : o.named_first       ? "FIRST"
                      : o.top_two           ? "top2"
                                            : "miss";
-  if (getenv("ACCURACY_DETAIL")) {
-    errs += strprintf(" k %zu ||", o.true_judgement.horizon);
-    for (std::size_t i = 0; i < o.ranked.size() && i < 4; ++i) {
-      const Judgement& j = o.judgements[i];
-      errs += strprintf(" %s v%+.1f e%+.1f L%.0f %.0f/%.0f%s |", o.ranked[i].c_str(),
-                        j.validation_gain, j.estimation_gain, j.validation_lr, j.estimation_lr,
-                        j.estimation_penalty, o.supported[i] ? "*" : "");
-    }
-  }
   return strprintf(
-      "%7llu %-15s %-22s start %-22s %-5s gain %+7.1f (sim %+8.1f) | %s |%s | %.1f s%s\n",
+      "%7llu %-15s %-22s start %-22s %-5s gain %+7.1f (held out %+8.1f) | %s |%s | %.1f s%s\n",
       static_cast<unsigned long long>(o.loop.seed), o.loop.category.c_str(), hidden.c_str(),
       o.loop.start_model.c_str(), mark, o.true_gain, o.true_validation_gain, ranked.c_str(),
       errs.c_str(), o.seconds, o.error.empty() ? "" : (" ERROR " + o.error).c_str());

@@ -12,7 +12,6 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/effect_judge.hpp"
 #include "valvediag/limit_cycle.hpp"
 #include "valvediag/model_fit.hpp"
 #include "valvediag/model_spec.hpp"
@@ -23,26 +22,18 @@
 namespace valvediag {
 
 struct Finding {
-  std::string effect;  // effect name (effects.md)
-  // 0..1: the held-out test's one-sided confidence that the trial predicts better, when the
-  // estimation part pays for its parameters (else 0).
-  double score = 0.0;
-  // Simulated-output fitness (eq 20) gained by the trial fit on validation and estimation data:
-  // reported, not decisive (an integrating loop's simulation runs away).
-  double validation_gain_percent = 0.0;
-  double estimation_gain_percent = 0.0;
-  // The smaller of the held-out and estimation gains of the k-step prediction fit at the loop's
-  // response time (effect_judge.hpp): what the ranking uses.
-  double gain_percent = 0.0;
-  Judgement judgement;  // the trial against the model: k-step fits, held-out test, penalty
+  std::string effect;                    // effect name (effects.md)
+  double score = 0.0;                    // 0..1, how likely this effect is the missing one
+  double validation_gain_percent = 0.0;  // fitness gained by the trial fit on validation data
+  double estimation_gain_percent = 0.0;  // ... on estimation data
+  double gain_percent = 0.0;             // the smaller of the two: what the score uses
   // A valve with memory: the trial's held_valve_validation_fitness() (NaN otherwise). Reported,
   // not scored: a stuck valve that does not slip in the held-out part holds PV as a compensated
   // load does (see held_valve_note).
   double held_valve_validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();
-  // The judge finds it significant and the gain clears DiagnoseOptions::min_gain_percent.
-  bool supported = false;
-  double evidence = 0.0;      // strongest residual test pointing to it, 0..1 (reported, not scored)
-  std::string evidence_test;  // that test's name
+  bool supported = false;                   // score and gain clear DiagnoseOptions' thresholds
+  double evidence = 0.0;                    // strongest residual test pointing to it, 0..1
+  std::string evidence_test;                // that test's name
   std::vector<NamedValue> parameters;       // the trial fit's parameters of the effect
   std::vector<ResidualInterval> intervals;  // where the model fails because of it
   std::vector<ResidualRegion> regions;      // operating regions that carry it
@@ -57,8 +48,7 @@ struct DiagnoseOptions {
   double validation_fraction = 0.3;
   std::vector<std::string> candidates;  // empty: every effect not in the model
   double min_gain_percent = 2.0;        // --auto: a step must gain this much (validation)
-  double min_score = 0.35;              // a supported finding scores at least this
-  JudgeOptions judge;                   // the held-out test's level
+  double min_score = 0.35;              // --auto: and score at least this
   int max_steps = 4;                    // --auto: at most this many effects added
   // The whole-record test (whole_record_test.hpp) when the climb ends without memory: off, the
   // verdict rests on the held-out trial fits and the limit cycle alone.

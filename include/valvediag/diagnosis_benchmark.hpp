@@ -22,20 +22,18 @@ struct ParameterError {
 
 struct BenchmarkOutcome {
   RandomLoop loop;
-  std::vector<std::string> ranked;    // the findings' effects, most likely first
-  std::vector<bool> supported;        // same order
-  std::vector<Judgement> judgements;  // same order
-  std::string first;                  // "" when diagnose named nothing
-  bool named_first = false;           // a hidden effect ranks first (controls: false)
-  bool top_two = false;               // every hidden effect in the top two (one: in the top two)
-  bool true_supported = false;        // the (first) hidden effect's finding is supported
-  // The hidden effect's trial against the start model: the gain the judge scores (held-out and
-  // estimation, the smaller) and the simulated-output gain on the held-out part, in points.
+  std::vector<std::string> ranked;  // the findings' effects, most likely first
+  std::vector<bool> supported;      // same order
+  std::string first;                // "" when diagnose named nothing
+  bool named_first = false;         // a hidden effect ranks first (controls: false)
+  bool top_two = false;             // every hidden effect in the top two (one: in the top two)
+  bool true_supported = false;      // the (first) hidden effect's finding is supported
+  // The hidden effect's trial against the start model: the gain the diagnosis scores (the smaller
+  // of the held-out and estimation gains) and the gain on the held-out part, in points.
   double true_gain = 0.0, true_validation_gain = 0.0;
-  bool gains = false;                         // true_gain >= 2 points (the target)
-  Judgement true_judgement, first_judgement;  // the judge's figures of those two trials
-  bool false_alarm = false;                   // a control with a supported finding
-  std::string false_effect;                   // what it found
+  bool gains = false;                  // true_gain >= 2 points (the target)
+  bool false_alarm = false;            // a control with a supported finding
+  std::string false_effect;            // what it found
   std::vector<ParameterError> errors;  // the hidden effects' fitted parameters against the truth
   double seconds = 0.0;
   std::string error;  // the diagnosis threw: why

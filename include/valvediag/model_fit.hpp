@@ -116,12 +116,6 @@ std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector
 std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double>& u,
                                    const std::vector<double>& y);
 
-// The loop's response time as a prediction horizon, in samples: the fitted dead time plus the
-// time the linear part's step response takes to reach 63 % of its end value (for an integrating
-// model, of its end slope), read within `cap` samples; at least nk + 2, at most `cap`. `cap` when
-// the fit has no linear part.
-std::size_t prediction_horizon(const ModelFit& fit, std::size_t cap);
-
 // The validation fitness (eq 20, held-out part) `fit` would have if its valve stayed, from the
 // first held-out sample on, where the estimation part left it (x_hat held; the linear part, c and
 // the load as fitted and predicted). NaN without a held-out part or a stable fit. A valve with

@@ -64,12 +64,8 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
     for (const auto& x : f) {
       o.ranked.push_back(x.effect);
       o.supported.push_back(x.supported);
-      o.judgements.push_back(x.judgement);
     }
-    if (!f.empty()) {
-      o.first = f.front().effect;
-      o.first_judgement = f.front().judgement;
-    }
+    if (!f.empty()) o.first = f.front().effect;
     const auto& hidden = loop.hidden;
     if (hidden.empty()) {
       for (const auto& x : f)
@@ -96,7 +92,6 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
             o.true_gain = x.gain_percent;
             o.true_validation_gain = x.validation_gain_percent;
             o.true_supported = x.supported;
-            o.true_judgement = x.judgement;
             first = false;
           }
           for (const auto& t : loop.truth)

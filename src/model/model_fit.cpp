@@ -484,6 +484,9 @@ struct Problem {
   Search s;
 };
 
+// The core's identify() searches dead times up to 200 samples.
+constexpr int kPreisachNkMax = 200;
+
 ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                       const ModelSpec& spec, const ModelFitOptions& opt, ModelFit fit) {
   const LinearOptions lo = linear_options(spec, opt, u.size());
@@ -493,7 +496,7 @@ ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y
   fo.nb_min = lo.range.nb_min;
   fo.nb_max = lo.range.nb_max;
   fo.nk_min = lo.range.nk_min;
-  fo.nk_max = lo.range.nk_max;
+  fo.nk_max = std::min(lo.range.nk_max, kPreisachNkMax);
   fo.L_min = opt.preisach_L_min;
   fo.L_max = opt.preisach_L_max;
   fo.validation_fraction = opt.validation_fraction;
@@ -613,31 +616,6 @@ double held_valve_validation_fitness(const ModelFit& fit, const std::vector<doub
     ys[t] += dy;
   }
   return fitness_percent(y, ys, e0, N);
-}
-
-std::size_t prediction_horizon(const ModelFit& fit, std::size_t cap) {
-  cap = std::max<std::size_t>(cap, 1);
-  if (fit.status == ModelFitStatus::NoStableModel || fit.b.empty()) return cap;
-  const std::size_t nk = static_cast<std::size_t>(std::max(0, fit.structure.nk));
-  // The step response of B/A (of the differenced model when integrating: its slope).
-  const std::size_t na = fit.a.size(), nb = fit.b.size();
-  std::vector<double> s(cap + 1, 0.0);
-  for (std::size_t t = 1; t <= cap; ++t) {
-    double v = 0.0;
-    for (std::size_t i = 1; i <= na && i <= t; ++i) v -= fit.a[i - 1] * s[t - i];
-    for (std::size_t j = 1; j <= nb; ++j)
-      if (t >= nk + j) v += fit.b[j - 1];
-    s[t] = v;
-  }
-  const double end = s[cap];
-  std::size_t t63 = cap;
-  if (std::isfinite(end) && end != 0.0)
-    for (std::size_t t = 1; t <= cap; ++t)
-      if (s[t] / end >= 0.63) {
-        t63 = t;
-        break;
-      }
-  return std::clamp<std::size_t>(t63, std::min(nk + 2, cap), cap);
 }
 
 double effect_parameter_count(const std::string& effect, const ModelFit& fit, double Ts) {

@@ -56,21 +56,15 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   else
     o << "residual:  RMS " << num(s.residual.rms, 3) << ", white-noise level "
       << num(s.residual.noise_level, 3) << "\n";
-  const std::size_t k = s.findings.empty() ? 0 : s.findings.front().judgement.horizon;
-  o << "findings (most likely missing first; PV predicted " << k << " samples ahead, "
-    << num(k * (t.size() >= 2 ? t[1] - t[0] : 1.0), 0) << " s):\n";
-  o << "  rank  effect          score  gain held out / estimation   LR held out  estimation "
-       "LR / penalty  (simulated: held out / estimation)\n";
+  o << "findings (most likely missing first):\n";
+  o << "  rank  effect          score  gain (val / est)      evidence\n";
   int rank = 0;
   for (const auto& f : s.findings) {
-    const Judgement& j = f.judgement;
-    char line[320];
-    std::snprintf(line, sizeof line,
-                  "  %-4d  %-14s  %5.2f  %+7.2f / %+7.2f            %8.1f     %8.1f / %-7.1f   "
-                  "(%+.2f / %+.2f)%s\n",
-                  ++rank, f.effect.c_str(), f.score, j.validation_gain, j.estimation_gain,
-                  j.validation_lr, j.estimation_lr, j.estimation_penalty, f.validation_gain_percent,
-                  f.estimation_gain_percent, f.supported ? "  supported" : "");
+    char line[256];
+    std::snprintf(line, sizeof line, "  %-4d  %-14s  %5.2f  %+7.2f / %+7.2f    %s %s\n", ++rank,
+                  f.effect.c_str(), f.score, f.validation_gain_percent, f.estimation_gain_percent,
+                  f.evidence_test.empty() ? "-" : f.evidence_test.c_str(),
+                  f.evidence_test.empty() ? "" : num(f.evidence).c_str());
     o << line;
   }
   for (const auto& f : s.findings)

@@ -1,6 +1,6 @@
 // A fixed sample of the randomized benchmark (scripts/accuracy.sh runs the full one): the first
 // development seeds, one case of each category per 12 seeds. The floors are the sample's measured
-// figures with one case of slack, so a change that loses more than one case here fails; the
+// figures less one case, so a change that loses more than one case here fails; the
 // generator's properties (fair cases, disjoint streams, reproducible draws) are checked exactly.
 #include <doctest/doctest.h>
 
@@ -12,6 +12,14 @@
 #include "valvediag/parallel_for.hpp"
 
 using namespace valvediag;
+
+namespace {
+// Measured on this sample (22 hidden effects, 2 controls): 10 named first, 13 gaining 2 points
+// or more, 1 control with a supported finding. A floor one case below each.
+constexpr int kFirstFloor = 9;
+constexpr int kGainFloor = 12;
+constexpr int kAlarmCeiling = 1;
+}  // namespace
 
 TEST_CASE("random loops: every category draws a fair case, reproducibly, from its seed") {
   for (std::uint64_t seed = 0; seed < 12; ++seed) {
@@ -79,8 +87,8 @@ TEST_CASE("benchmark sample: hidden effects named first, gains, and quiet contro
   }
 #ifndef VALVEDIAG_SANITIZED
   CHECK(hidden == 22);
-  CHECK(first >= 0);
-  CHECK(gains >= 0);
-  CHECK(alarms <= 1);
+  CHECK(first >= kFirstFloor);
+  CHECK(gains >= kGainFloor);
+  CHECK(alarms <= kAlarmCeiling);
 #endif
 }
