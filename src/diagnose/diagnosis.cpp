@@ -31,7 +31,7 @@ double param(const std::vector<NamedValue>& p, const char* name, double fallback
 
 // One plain line an engineer can act on, with the trial fit's figures.
 std::string explain(const std::string& effect, const ModelFit& trial,
-                    const std::vector<NamedValue>& p) {
+                    const std::vector<NamedValue>& p, const ModelSpec& model) {
   const double Ts = 1.0;
   (void)Ts;
   if (effect == "stiction") {
@@ -64,10 +64,16 @@ std::string explain(const std::string& effect, const ModelFit& trial,
                                   d)
                             : "play in the valve linkage after reversals: add `deadband`";
   }
-  if (effect == "preisach")
-    return "friction depends on the valve position or the direction of travel (asymmetric "
-           "hysteresis); a "
-           "two-parameter stiction model is not enough: add `preisach`";
+  if (effect == "preisach") {
+    // add_effect puts preisach in the place of the friction it generalizes.
+    const char* narrower = model.has("stiction")   ? "stiction"
+                           : model.has("deadband") ? "deadband"
+                                                   : nullptr;
+    return std::string(
+               "friction depends on the valve position or the direction of travel "
+               "(asymmetric hysteresis); a two-parameter stiction model is not enough: ") +
+           (narrower ? "replace `" + std::string(narrower) + "` by `preisach`" : "add `preisach`");
+  }
   if (effect == "saturation") {
     const double lo = param(p, "lower"), hi = param(p, "upper");
     return strprintf(
@@ -270,7 +276,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     for (const auto& g : step.residual.regions)
       if (region_fits(f.effect, g.kind) && g.excess >= 1.3 && g.share >= 0.1)
         f.regions.push_back(g);
-    f.explanation = explain(f.effect, t, f.parameters);
+    f.explanation = explain(f.effect, t, f.parameters, model);
     step.findings.push_back(std::move(f));
   }
   // The stiction trial's leftover points to `preisach` only where preisach explains more than

@@ -183,6 +183,9 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
   CHECK((*loop_in(j, "bad"))["error"].get<std::string>().find("bad.csv:3") != std::string::npos);
   CHECK((*loop_in(j, "tiny"))["verdict"] == "not-enough-data");
 
+#ifdef VALVEDIAG_SANITIZED
+  return;  // two more sweeps of the same diagnoses; sweep-merge's own checks run in Release
+#endif
   // Two shards cover the list once; sweep-merge gives the same verdicts.
   const std::string p0 = (kTmp / "part-0.json").string(), p1 = (kTmp / "part-1.json").string();
   CHECK(run({"sweep", sticky, clean, bad, tiny, "--shard", "0/2", "--json", p0, "--quiet"}, kLimit)
