@@ -8,7 +8,9 @@
 # core (the baseline), with --jobs 1 (each loop's fits threaded over the cores) and with one loop
 # per core; SWEEP_REPS (default 3) runs each, medians and speed-ups. Then the stiction
 # quantification at 3000-48000 samples beside computing every valve path (QUANT_REPS, default 3,
-# runs). Arguments go to the first part.
+# runs). Last, the speed targets of issue 33: fit at 25,000 samples, diagnose --auto at 4,000 and a
+# sweep over the 41 shared plant files, each beside the same run on one core (TARGET_REPS,
+# default 3, runs). Arguments go to the first part.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
@@ -56,3 +58,39 @@ awk -v base="$base" -v one="$one" -v all="$all" -v c="$cores" -v r="$reps" 'BEGI
 echo
 echo "== stiction quantification"
 build/bench/valvediag_quantification_bench "${QUANT_REPS:-3}"
+
+echo
+echo "== speed targets (issue 33): medians of ${TARGET_REPS:-3} runs, beside one core (taskset) as the baseline"
+# Wall seconds of one command; arguments: the command.
+seconds() {
+  local t0 t1
+  t0=$(date +%s.%N)
+  "$@" >/dev/null
+  t1=$(date +%s.%N)
+  awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f\n", b - a }'
+}
+# One target: its name, the goal in s, then the command.
+target() {
+  local name=$1 goal=$2 reps=${TARGET_REPS:-3} all base
+  shift 2
+  all=$(for _ in $(seq "$reps"); do seconds "$@"; done | median)
+  base=$(for _ in $(seq "$reps"); do seconds taskset -c 0 "$@"; done | median)
+  awk -v n="$name" -v g="$goal" -v a="$all" -v b="$base" -v c="$cores" 'BEGIN {
+    printf "  %-34s %6.2f s on %d cores (goal < %s s, %s), %6.2f s on one core\n", n, a, c, g,
+      a < g ? "met" : "NOT met", b
+  }'
+}
+$v simulate --scenario paper-ex1 --seed 1 --samples 25000 --out "$work/fit25k.csv" >/dev/null
+$v simulate --scenario paper-ex1 --seed 1 --samples 4000 --out "$work/auto4k.csv" >/dev/null
+target "fit, 25,000 samples" 3 $v fit "$work/fit25k.csv"
+target "diagnose --auto, 4,000 samples" 4 $v diagnose "$work/auto4k.csv" --auto --no-history
+shared=${VALVEDIAG_SHARED_DIR:-../shared}
+plant="$shared/data/plant-loops"
+if [ -d "$plant" ]; then
+  target "sweep, $(ls "$plant"/stiction/* "$plant"/no-stiction/* | wc -l) plant files, --jobs $cores" 25 \
+    $v sweep "$plant"/stiction/* "$plant"/no-stiction/* --delimiter tab --skip-lines 2 \
+    --skip-after-header 2 --time-format "%Y-%m-%d %H:%M:%S" --t 1 --op "*.MV" --pv "*.PV" \
+    --sp "*.SV" --jobs "$cores" --json "$work/plant.json"
+else
+  echo "  no $plant: the sweep target is skipped"
+fi

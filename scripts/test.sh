@@ -5,12 +5,19 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 jobs=$(nproc)
+# Each phase's wall time, for keeping CI within its limit.
+phase() { echo "== test.sh: $1 done at ${SECONDS} s"; }
+phase "dependencies"
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release
 cmake --build build -j"$jobs"
+phase "Release build"
 ctest --test-dir build --output-on-failure -j"$jobs"
+phase "Release tests"
 # The benchmarks are built (with -Werror) and run by the Release tree and their scripts.
 cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVALVEDIAG_SANITIZE=ON \
   -DVALVEDIAG_BENCH=OFF
 cmake --build build-asan -j"$jobs"
+phase "sanitizer build"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
   ctest --test-dir build-asan --output-on-failure -j"$jobs"
+phase "sanitizer tests"

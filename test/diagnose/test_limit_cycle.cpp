@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "valvediag/diagnosis.hpp"
@@ -208,6 +209,9 @@ TEST_CASE("an outside cycle and the linear scenarios are not stick-slip") {
   SUBCASE("linear-clean and paper-ex1-linear are never stick-slip") {
     for (const char* name : {"linear-clean", "paper-ex1-linear"}) {
       CAPTURE(name);
+#ifdef VALVEDIAG_SANITIZED
+      if (std::string(name) != "linear-clean") continue;  // the same path, once sanitized
+#endif
       const LoopData d = run_scenario(scenario_by_name(name), 1, 3000);
       const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("linear"));
       CHECK_FALSE(dg.limit_cycle.stick_slip);

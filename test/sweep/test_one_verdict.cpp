@@ -66,11 +66,11 @@ std::string page_verdict(const std::string& html) {
   return html.substr(from, html.find('<', from) - from);
 }
 
-// A simulated record of 2000 samples with no model history.
+// A simulated record of 2000 samples (1000 under the sanitizers) with no model history.
 std::string simulated(const std::string& scenario, int seed) {
   const std::string csv = (kTmp / ("one-" + scenario + ".csv")).string();
   const test::CliResult s = run({"simulate", "--scenario", scenario, "--seed", std::to_string(seed),
-                                 "--samples", "2000", "--out", csv});
+                                 "--samples", kSanitized ? "1000" : "2000", "--out", csv});
   REQUIRE(s.status == 0);
   fs::remove(csv + ".history.json");
   return csv;
