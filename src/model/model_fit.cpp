@@ -442,12 +442,23 @@ void predict_load_on_validation(ModelFit& fit, const std::vector<double>& y, std
 // search coordinates. With `order` the extra lag is searched over the base na, nb range (the lag
 // stands for the extra orders there, at a quarter of the cost); the final fit uses the whole
 // range.
+// A second search over the same valve coordinates with another linear range.
+void copy_coordinates(Search& to, const Search& from) {
+  to.effects = from.effects;
+  to.coords = from.coords;
+  to.offset = from.offset;
+  to.penalty = from.penalty;
+  to.profiled = from.profiled;
+}
+
 struct Problem {
   Problem(const std::vector<double>& u, const std::vector<double>& y, double Ts,
           const ModelSpec& spec, const ModelFitOptions& opt)
       : lo(linear_options(spec, opt, u.size())),
         est(y, lo),
-        narrow(narrow_estimator(y, spec, opt, lo)),
+        narrow_lo(narrow_options(spec, opt, lo)),
+        narrow(narrow_lo ? std::optional<ArxEstimator>(std::in_place, y, *narrow_lo)
+                         : std::nullopt),
         s(u, narrow ? *narrow : est, input_range(u, Ts)) {
     for (const auto& e : spec.effects) {
       const auto c = search_parameters(e, s.range);
@@ -468,20 +479,45 @@ struct Problem {
     const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
     return {*lo, *hi, Ts};
   }
-  static std::optional<ArxEstimator> narrow_estimator(const std::vector<double>& y,
-                                                      const ModelSpec& spec,
-                                                      const ModelFitOptions& opt,
-                                                      const LinearOptions& lo) {
-    if (!spec.has("order")) return std::nullopt;
+  // The valve search scores every candidate with the best linear part over a structure range.
+  // `order` and `delay` widen that range; the search scores over the base grid's orders and
+  // dead times (fit_model then searches again around a dead time the base grid does not hold).
+  static std::optional<LinearOptions> narrow_options(const ModelSpec& spec,
+                                                     const ModelFitOptions& opt,
+                                                     const LinearOptions& lo) {
     LinearOptions ln = lo;
     ln.range.na_max = std::min(lo.range.na_max, std::max(opt.structure.na_max, ln.range.na_min));
     ln.range.nb_max = std::min(lo.range.nb_max, std::max(opt.structure.nb_max, ln.range.nb_min));
-    return ArxEstimator(y, ln);
+    if (spec.has("delay"))
+      ln.range.nk_max = std::min(lo.range.nk_max, std::max(opt.structure.nk_max, lo.range.nk_min));
+    if (ln.range.na_max == lo.range.na_max && ln.range.nb_max == lo.range.nb_max &&
+        ln.range.nk_max == lo.range.nk_max)
+      return std::nullopt;
+    return ln;
+  }
+  // The search scored fewer dead times than the whole range holds: a second search may help.
+  bool delay_window() const { return narrow_lo && narrow_lo->range.nk_max < lo.range.nk_max; }
+  // With delay_window(): the same valve coordinates, scored over the dead times within the base
+  // grid's nk span of nk.
+  Search& around_delay(const std::vector<double>& u, const std::vector<double>& y, int nk,
+                       const ModelFitOptions& opt) {
+    const int span = std::max(1, opt.structure.nk_max - opt.structure.nk_min);
+    LinearOptions lw = *narrow_lo;
+    lw.range.nk_min = std::clamp(nk - span, lo.range.nk_min, lo.range.nk_max);
+    lw.range.nk_max = std::clamp(nk + span, lw.range.nk_min, lo.range.nk_max);
+    again.reset();
+    around.emplace(y, lw);
+    again.emplace(u, *around, s.range);
+    copy_coordinates(*again, s);
+    return *again;
   }
   LinearOptions lo;
   ArxEstimator est;
+  std::optional<LinearOptions> narrow_lo;
   std::optional<ArxEstimator> narrow;
   Search s;
+  std::optional<ArxEstimator> around;
+  std::optional<Search> again;
 };
 
 // The core's identify() searches dead times up to 200 samples.
@@ -661,6 +697,36 @@ LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, 
   return lo;
 }
 
+// The valve coordinates' search: one effect alone by search_space; composed chains each effect
+// first on its own (the others at rest), then a joint polish of all coordinates from there (a
+// joint grid is too coarse in 4 or more dimensions). The best point is left in s.best_z.
+nlopt_result search_valve(Search& s, const ModelFitOptions& opt) {
+  if (s.effects.size() > 1) {
+    s.base = neutral_point(s);
+    // Two passes: an effect fitted with the others still at rest can take a wrong basin.
+    for (std::size_t pass = 0; pass < 2 * s.effects.size(); ++pass) {
+      const std::size_t k = pass % s.effects.size();
+      s.active.clear();
+      const std::size_t end = k + 1 < s.effects.size() ? s.offset[k + 1] : s.coords.size();
+      for (std::size_t i = s.offset[k]; i < end; ++i)
+        if (s.coords[i].profile_points == 0) s.active.push_back(i);
+      if (s.active.empty()) continue;
+      search_space(s, opt);
+      s.base = s.best_z;
+    }
+    s.active = s.searched();
+    std::vector<double> zj = s.restrict_to_active(s.base);
+    const int n_local =
+        opt.local_evaluations > 0 ? opt.local_evaluations : 60 * static_cast<int>(s.coords.size());
+    return run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, nullptr, 0.02).result;
+  }
+  if (!s.profiled.empty()) {
+    s.base = neutral_point(s);
+    s.active = s.searched();
+  }
+  return search_space(s, opt);
+}
+
 ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                    const ModelSpec& spec, const ModelFitOptions& opt) {
   const auto t_start = std::chrono::steady_clock::now();
@@ -688,37 +754,28 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
   fit.status = ModelFitStatus::Converged;
   fit.stop_reason = "no valve parameters to search";
   if (!s.coords.empty()) {
-    nlopt_result outcome = NLOPT_SUCCESS;
-    if (s.effects.size() > 1) {
-      // Composed chains: each effect first on its own (the others at rest), then a joint polish
-      // of all coordinates from there (a joint grid is too coarse in 4 or more dimensions).
-      s.base = neutral_point(s);
-      // Two passes: an effect fitted with the others still at rest can take a wrong basin.
-      for (std::size_t pass = 0; pass < 2 * s.effects.size(); ++pass) {
-        const std::size_t k = pass % s.effects.size();
-        s.active.clear();
-        const std::size_t end = k + 1 < s.effects.size() ? s.offset[k + 1] : s.coords.size();
-        for (std::size_t i = s.offset[k]; i < end; ++i)
-          if (s.coords[i].profile_points == 0) s.active.push_back(i);
-        if (s.active.empty()) continue;
-        search_space(s, opt);
-        s.base = s.best_z;
-      }
-      s.active = s.searched();
-      std::vector<double> zj = s.restrict_to_active(s.base);
-      const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations
-                                                    : 60 * static_cast<int>(s.coords.size());
-      outcome =
-          run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, nullptr, 0.02).result;
-    } else {
-      if (!s.profiled.empty()) {
-        s.base = neutral_point(s);
-        s.active = s.searched();
-      }
-      outcome = search_space(s, opt);
-    }
+    nlopt_result outcome = search_valve(s, opt);
     z = s.best_z;
-    widen_unsupported_limits(s, y, z);
+    const Search* won = &s;
+    if (p.delay_window()) {
+      // The first search scored the base grid's dead times only. The whole range's best one for
+      // its valve, when outside them, centres a second search of the base grid's nk span; the
+      // valve that fits better over the whole range wins. Two searches, not one over hundreds
+      // of dead times.
+      const LinearFit first = est.fit(s.valve_position(z.data()), false);
+      const StructureRange& r = p.narrow_lo->range;
+      if (first.ok && first.structure.nk > r.nk_max) {
+        Search& again = p.around_delay(u, y, first.structure.nk, opt);
+        const nlopt_result second = search_valve(again, opt);
+        const LinearFit f = est.fit(again.valve_position(again.best_z.data()), false);
+        if (f.ok && f.sse < first.sse) {
+          z = again.best_z;
+          outcome = second;
+          won = &again;
+        }
+      }
+    }
+    widen_unsupported_limits(*won, y, z);
     if (opt.output_error_iterations > 0) {
       // The search scores valve parameters with the least-squares linear part; the final linear
       // part is the output-error refinement. The chain at rest (x = u) is the model without the
@@ -750,7 +807,7 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
                           "); best point seen kept";
         break;
     }
-    fit.evaluations = s.evaluations.load();
+    fit.evaluations = s.evaluations.load() + (p.again ? p.again->evaluations.load() : 0);
     fit.valve_coordinates = z;
     ValveChain chain = s.chain(z.data());
     fit.valve = chain.effects();
@@ -800,7 +857,8 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
       fit.status == ModelFitStatus::NoStableModel)
     return out;
   Problem p(u, y, Ts, fit.spec, opt);
-  Search& s = p.s;
+  // Scored over dead times that hold the fit's own (its search's second range, `delay`).
+  Search& s = p.delay_window() ? p.around_delay(u, y, fit.structure.nk, opt) : p.s;
   if (s.coords.size() != fit.valve_coordinates.size()) return out;
   std::size_t band = s.coords.size();
   for (std::size_t k = 0; k < s.effects.size(); ++k)
