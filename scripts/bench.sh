@@ -35,13 +35,18 @@ v=build/src/cli/valvediag
 for s in paper-ex1 kano deadband linear-clean characteristic second-order; do
   $v simulate --scenario "$s" --seed 1 --samples 2000 --out "$work/$s.csv" >/dev/null
 done
-# Wall seconds of one sweep over the files; arguments: a command prefix (may be empty), --jobs.
-sweep_seconds() {
+# Wall seconds of one command; arguments: the command.
+seconds() {
   local t0 t1
   t0=$(date +%s.%N)
-  $1 $v sweep "$work"/*.csv --jobs "$2" --json "$work/out.json" >/dev/null
+  "$@" >/dev/null
   t1=$(date +%s.%N)
   awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f\n", b - a }'
+}
+# One sweep over the files; arguments: a command prefix (may be empty), --jobs.
+sweep_seconds() {
+  # shellcheck disable=SC2086  # the prefix is words or nothing
+  seconds $1 $v sweep "$work"/*.csv --jobs "$2" --json "$work/out.json"
 }
 median() { sort -n | awk '{ v[NR] = $1 } END { print v[int((NR + 1) / 2)] }'; }
 reps=${SWEEP_REPS:-3}
@@ -61,14 +66,6 @@ build/bench/valvediag_quantification_bench "${QUANT_REPS:-3}"
 
 echo
 echo "== speed targets (issue 33): medians of ${TARGET_REPS:-3} runs, beside one core (taskset) as the baseline"
-# Wall seconds of one command; arguments: the command.
-seconds() {
-  local t0 t1
-  t0=$(date +%s.%N)
-  "$@" >/dev/null
-  t1=$(date +%s.%N)
-  awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f\n", b - a }'
-}
 # One target: its name, the goal in s, then the command.
 target() {
   local name=$1 goal=$2 reps=${TARGET_REPS:-3} all base
