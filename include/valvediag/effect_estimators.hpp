@@ -149,9 +149,14 @@ struct SearchParameter {
   int profile_points = 0;
 };
 
-// What the data says about the search box: the OP range and the sample period.
+// What the data says about the search box: the OP range, the sample period, and the window the
+// valve mostly works in (OP's 5 and 95 % quantiles; both 0: the OP range). Controller transients
+// to 0 or 100 % widen the range, not the window.
 struct InputRange {
   double umin = 0.0, umax = 100.0, Ts = 1.0;
+  double window_lo = 0.0, window_hi = 0.0;
+  double lo() const { return window_hi > window_lo ? window_lo : umin; }
+  double hi() const { return window_hi > window_lo ? window_hi : umax; }
 };
 
 // Search coordinates of one valve effect, bounded from the OP range R = umax - umin:
@@ -166,9 +171,15 @@ struct InputRange {
 //     [1e-3, ln 200];
 //   actuator-lag: tau in [0, 60 Ts];
 //   order: an extra process lag in [0, 60 Ts] (a first-order block after the valve effects,
-//     besides the wider na, nb range).
-// `preisach` and the other process effects have none (they are fitted otherwise). Throws for
-// unknown names.
+//     besides the wider na, nb range);
+//   preisach position-dependent: He's friction, one level below a valve position p and another
+//     above it (PositionDependentStiction, changing linearly across a transition around p): the
+//     severe side's fs in [0, R], the mild side c in [-1, 1] (c > 0: fs (1 - c) below p, fs
+//     above; c < 0: fs below, fs (1 + c) above; 0: He's one level), r = fd/fs in [0, 1] on both
+//     sides, p in the working window, the motion at the start (profiled, as He's), and the
+//     transition's width as a share of the working window in [0.02, 1].
+// The general `preisach` and the other process effects have none (they are fitted otherwise).
+// Throws for unknown names.
 std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputRange& r);
 // The block for coordinates theta (as many as search_parameters gives).
 ValveEffect make_valve_block(const EffectSpec& e, const double* theta, const InputRange& r);

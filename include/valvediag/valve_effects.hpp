@@ -116,17 +116,23 @@ class PositionDependentStiction {
     double fd;        // kinetic band at that position
   };
   // Needs at least one point, strictly increasing positions and fs >= fd >= 0 at every point.
-  explicit PositionDependentStiction(std::vector<Point> points);
-  void reset(double u0) { reset(u0, u0, 0.0); }
+  // `initial_motion` in [-1, 1] as HeStiction's, with the bands at the starting OP.
+  explicit PositionDependentStiction(std::vector<Point> points, double initial_motion = 0.0);
+  void reset(double u0) {
+    const double r = initial_motion_ * fd_at(u0);
+    reset(u0, u0 - r, r);
+  }
   void reset(double u0, double x0, double residual_force);
   double step(double u);
   double output() const { return x_; }
   const std::vector<Point>& points() const { return points_; }
   double fs_at(double x) const;
   double fd_at(double x) const;
+  double initial_motion() const { return initial_motion_; }
 
  private:
   std::vector<Point> points_;
+  double initial_motion_ = 0.0;
   double u_prev_ = 0.0, x_ = 0.0, u_r_ = 0.0;
 };
 

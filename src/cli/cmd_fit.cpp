@@ -327,7 +327,7 @@ void add_fit(CLI::App& app, int& exit_code) {
     FitRun run = run_fit(d, fo, a->output, range);
     if (!a->no_history && run.result.status == IdentificationStatus::Ok) {
       HistoryEntry h;
-      h.model = "preisach";
+      h.model = "preisach:general";  // the core method alone (the paper's)
       h.fitness_percent = run.result.fitness_percent;
       h.validation_fitness_percent = run.result.validation_fitness_percent;
       const auto& st = run.result.best.structure;

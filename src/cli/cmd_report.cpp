@@ -161,7 +161,7 @@ void add_report(CLI::App& app, int& exit_code) {
     const std::string history = history_path_for(name);
     auto ladder = load_history(history);
     if (!spec) {
-      spec = parse_model_spec(ladder.empty() ? "preisach" : ladder.back().model);
+      spec = parse_model_spec(ladder.empty() ? "preisach:general" : ladder.back().model);
       std::cout << "note: model " << to_string(*spec)
                 << (ladder.empty() ? " (no model history for this data yet)"
                                    : " (the last model of this data's ladder)")

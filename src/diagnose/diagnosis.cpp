@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "valvediag/autocorrelation.hpp"
 #include "valvediag/pairwise_ranking.hpp"
 #include "valvediag/text_stats.hpp"
 
@@ -69,10 +70,19 @@ std::string explain(const std::string& effect, const ModelFit& trial,
     const char* narrower = model.has("stiction")   ? "stiction"
                            : model.has("deadband") ? "deadband"
                                                    : nullptr;
-    return std::string(
-               "friction depends on the valve position or the direction of travel "
-               "(asymmetric hysteresis); a two-parameter stiction model is not enough: ") +
-           (narrower ? "replace `" + std::string(narrower) + "` by `preisach`" : "add `preisach`");
+    const std::string what =
+        narrower ? "replace `" + std::string(narrower) + "` by `preisach`" : "add `preisach`";
+    const double fs = param(p, "fs"), mild = param(p, "fs_mild"), at = param(p, "position");
+    if (std::isfinite(fs) && std::isfinite(mild) && std::isfinite(at))
+      return strprintf(
+                 "friction depends on the valve position: OP must travel about %.1f %% after a "
+                 "reversal %s OP %.0f %%, about %.1f %% %s it; one stiction band is not enough: ",
+                 fs, param(p, "severe_above") > 0 ? "above" : "below", at, mild,
+                 param(p, "severe_above") > 0 ? "below" : "above") +
+             what;
+    return "friction depends on the valve position or the direction of travel (asymmetric "
+           "hysteresis); a two-parameter stiction model is not enough: " +
+           what;
   }
   if (effect == "saturation") {
     const double lo = param(p, "lower"), hi = param(p, "upper");
@@ -153,6 +163,14 @@ bool same_prediction(const std::vector<double>& y, const ModelFit& a, const Mode
   return std::isfinite(d) && d < 0.5 * std::min(ra, rb);
 }
 
+// The chi-square distribution's 99 % quantile with k degrees of freedom (Wilson and Hilferty's
+// cube-root normal approximation: within 1 % for k >= 1).
+double chi_square_quantile_99(double k) {
+  constexpr double z = 2.326348;  // the standard normal's 99 % quantile
+  const double c = 2.0 / (9.0 * k);
+  return k * std::pow(1.0 - c + z * std::sqrt(c), 3.0);
+}
+
 DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                        const ModelSpec& model, const DiagnoseOptions& opt) {
   const ModelFitOptions fo = fit_options(opt);
@@ -176,8 +194,13 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     // On a model with `stiction` or `deadband`, add_effect puts `preisach` in its place: the
     // wider hysteresis is tried as what the two-parameter friction misses (friction that depends
     // on the valve position or the direction of travel).
+    // Position-dependent friction refines a fitted two-parameter friction (its search starts
+    // from He's fit, and it scores beyond it): without one in the model, `preisach` is tried as
+    // the paper's general weights alone, at a tenth of the cost, beside the stiction trial.
+    const bool general =
+        info.name == "preisach" && !model.has("stiction") && !model.has("deadband");
     try {
-      trials.push_back(add_effect(model, info.name));
+      trials.push_back(add_effect(model, general ? "preisach:general" : info.name));
       names.push_back(info.name);
     } catch (const ModelSpecError&) {
       // Not combinable with this model: preisach beside saturation, characteristic or
@@ -279,21 +302,61 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     f.explanation = explain(f.effect, t, f.parameters, model);
     step.findings.push_back(std::move(f));
   }
-  // The stiction trial's leftover points to `preisach` only where preisach explains more than
-  // stiction does: otherwise the general hysteresis is not what the leftover needs.
+  // `preisach` generalizes the two-parameter friction trials of the same step (stiction,
+  // deadband: the paper's Proposition 1). What it adds is its gain beyond the better of them and
+  // the model, on both parts of the record: it is scored on that, relative to the error that one
+  // leaves, and is supported only when that one fails a likelihood-ratio test against it on the
+  // estimation part (99 %, the extra parameters' degrees of freedom, its effective residual
+  // samples), besides gaining what any finding must over the model.
+  // (Measured: position-dependent friction, five figures, gained 0.1-1 point more than a
+  // deadband on backlash loops and ranked first on a residual hint.)
   {
-    Finding* st = nullptr;
     Finding* pr = nullptr;
-    for (auto& f : step.findings) {
-      if (f.effect == "stiction") st = &f;
+    std::size_t nested = fits.size();
+    for (auto& f : step.findings)
       if (f.effect == "preisach") pr = &f;
+    for (std::size_t i = 0; i < fits.size() && i < step.findings.size(); ++i) {
+      const Finding& f = step.findings[i];
+      if ((f.effect == "stiction" || f.effect == "deadband") &&
+          (nested == fits.size() || f.gain_percent > step.findings[nested].gain_percent))
+        nested = i;
     }
-    if (st && pr && after_stiction && pr->gain_percent <= st->gain_percent) {
-      pr->evidence = 0.0;
-      pr->evidence_test.clear();
-      const double rel = pr->gain_percent / std::max(100.0 - base_est, 1.0);
-      pr->score = pr->gain_percent > 0 ? 0.6 * std::clamp(rel / 0.3, 0.0, 1.0) : 0.0;
-      pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent;
+    if (pr && nested < fits.size()) {
+      const Finding& nf = step.findings[nested];
+      const ModelFit& nt = fits[nested];
+      // Beyond the better of the narrower trial and the model itself (a narrower trial that
+      // loses is no bar to clear).
+      const double nval = std::max(nf.validation_gain_percent, 0.0);
+      const double nest = std::max(nf.estimation_gain_percent, 0.0);
+      const double beyond =
+          std::min(pr->validation_gain_percent - nval, pr->estimation_gain_percent - nest);
+      const double left = std::max(100.0 - base_est - nest, 1.0);
+      if (beyond <= 0) {
+        pr->evidence = 0.0;
+        pr->evidence_test.clear();
+      }
+      pr->score =
+          beyond > 0 ? 0.6 * std::clamp(beyond / left / 0.3, 0.0, 1.0) + 0.4 * pr->evidence : 0.0;
+      // Fitness is 100 (1 - |e| / |y - mean|) on (nearly) the same samples: the ratio of the
+      // residual sums of squares is the squared ratio of what each leaves.
+      bool lr_passes = false;
+      const bool over_trial = nf.estimation_gain_percent > 0;  // else: over the model
+      const ModelFit& ref = over_trial ? nt : step.fit;
+      if (beyond > 0 && ref.y_sim.size() == y.size() && ref.estimation_end > ref.first_sample + 1) {
+        std::vector<double> e;
+        for (std::size_t t = ref.first_sample; t < ref.estimation_end; ++t)
+          e.push_back(y[t] - ref.y_sim[t]);
+        const double n_eff = effective_sample_size(e);
+        const double ratio = std::max(100.0 - pr->trial_fitness_percent, 1e-9) /
+                             std::max(100.0 - ref.fitness_percent, 1e-9);
+        const ModelFit& pt = fits[static_cast<std::size_t>(pr - step.findings.data())];
+        const double dof =
+            std::max(1.0, effect_parameter_count("preisach", pt, Ts) -
+                              (over_trial ? effect_parameter_count(nf.effect, nt, Ts) : 0.0));
+        lr_passes = -2.0 * n_eff * std::log(ratio) > chi_square_quantile_99(dof);
+      }
+      pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent &&
+                      beyond > 0 && lr_passes;
     }
   }
   // Scores saturate when the model leaves much to explain; among near-equal scores the larger

@@ -35,6 +35,7 @@ double estimate_of(const TrueParameter& t, const Finding& f) {
     if (!std::isfinite(lo) || !std::isfinite(hi)) return std::nan("");
     return std::abs(lo - t.value) < std::abs(hi - t.value) ? lo : hi;
   }
+  if (t.name == "mild_band") return named(p, "fs_mild");
   if (t.name == "log_rangeability") return named(p, "curvature");
   if (t.name == "tau") return named(p, "tau");
   if (t.name == "dead_time") return named(p, "dead_time");

@@ -282,6 +282,11 @@ std::vector<double> neutral_point(const Search& s) {
     const auto& e = s.effects[k];
     if (e.name == "saturation") z[s.offset[k] + 1] = 1.0;
     if (e.name == "characteristic" && e.variant == "auto") z[s.offset[k]] = 0.5;
+    if (e.name == "preisach") {  // one level everywhere: no mild side; the window's middle,
+      z[s.offset[k] + 1] = 0.5;  // over a tenth of it
+      z[s.offset[k] + 3] = 0.5;
+      z[s.offset[k] + 5] = s.coordinate(s.offset[k] + 5, 0.1);
+    }
   }
   return z;
 }
@@ -477,7 +482,14 @@ struct Problem {
   }
   static InputRange input_range(const std::vector<double>& u, double Ts) {
     const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
-    return {*lo, *hi, Ts};
+    std::vector<double> v(u);
+    const auto at = [&v](double q) {
+      const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(v.size() - 1));
+      std::nth_element(v.begin(), v.begin() + k, v.end());
+      return v[static_cast<std::size_t>(k)];
+    };
+    const double w_lo = at(0.05), w_hi = at(0.95);
+    return {*lo, *hi, Ts, w_lo, w_hi};
   }
   // The valve search scores every candidate with the best linear part over a structure range.
   // `order` and `delay` widen that range; the search scores over the base grid's orders and
@@ -569,6 +581,7 @@ ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y
   for (double v : m.mu) nonzero += v > 0;
   for (auto& fe : fit.effects) {
     if (fe.name != "preisach") continue;
+    fe.variant = "general";
     fe.parameters = {{"L", static_cast<double>(m.grid.L), "levels"},
                      {"nonzero_weights", static_cast<double>(nonzero), ""},
                      {"umin", m.grid.umin, "OP"},
@@ -663,7 +676,9 @@ double effect_parameter_count(const std::string& effect, const ModelFit& fit, do
       if (v.name == name) return v.value;
     return fallback;
   };
-  if (effect == "preisach") return std::max(1.0, param("nonzero_weights", 1.0));
+  // The general weights count each; position-dependent friction has fs, the mild side, fd/fs,
+  // the position and the transition's width.
+  if (effect == "preisach") return std::max(1.0, param("nonzero_weights", 5.0));
   if (effect == "disturbance") {
     const double h = param("knot_spacing", 0.0) / Ts;
     return h > 0 ? static_cast<double>(fit.estimation_end - fit.first_sample) / h + 1.0 : 10.0;
@@ -700,20 +715,49 @@ LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, 
 // The valve coordinates' search: one effect alone by search_space; composed chains each effect
 // first on its own (the others at rest), then a joint polish of all coordinates from there (a
 // joint grid is too coarse in 4 or more dimensions). The best point is left in s.best_z.
+// Effect k's coordinates searched from s.base (the others held there); s.best_z holds the best
+// point seen. Position-dependent friction in three stages, each from the best point before: one
+// level everywhere (He's fs and fd/fs: the two-parameter stiction it nests), then where and how
+// much the level changes (over a tenth of the working window), then all five polished together
+// with the transition's width. A joint grid over five coordinates is too coarse to hold a band
+// of a few % of OP.
+nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt) {
+  const std::size_t o = s.offset[k];
+  const auto stage = [&](std::vector<std::size_t> active, const ModelFitOptions& so) {
+    s.active = std::move(active);
+    const nlopt_result r = search_space(s, so);
+    s.base = s.best_z;
+    return r;
+  };
+  if (s.effects[k].name == "preisach") {
+    // He's stage on He's own grid (its cost is rugged: a coarser grid polished into worse
+    // basins than the `stiction` fit it must not lose to); the change's on a grid half as fine.
+    ModelFitOptions coarse = opt;
+    if (coarse.grid_points == 0) coarse.grid_points = 11;
+    stage({o, o + 2}, opt);
+    stage({o + 1, o + 3}, coarse);
+    s.active = {o, o + 1, o + 2, o + 3, o + 5};
+    std::vector<double> z = s.restrict_to_active(s.base);
+    const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations : 60 * 5;
+    const nlopt_result r =
+        run_nlopt(NLOPT_LN_NELDERMEAD, s, z, n_local, opt.local_xtol, nullptr, 0.02).result;
+    s.base = s.best_z;
+    return r;
+  }
+  std::vector<std::size_t> active;
+  const std::size_t end = k + 1 < s.effects.size() ? s.offset[k + 1] : s.coords.size();
+  for (std::size_t i = o; i < end; ++i)
+    if (s.coords[i].profile_points == 0) active.push_back(i);
+  if (active.empty()) return NLOPT_SUCCESS;
+  return stage(std::move(active), opt);
+}
+
 nlopt_result search_valve(Search& s, const ModelFitOptions& opt) {
   if (s.effects.size() > 1) {
     s.base = neutral_point(s);
     // Two passes: an effect fitted with the others still at rest can take a wrong basin.
-    for (std::size_t pass = 0; pass < 2 * s.effects.size(); ++pass) {
-      const std::size_t k = pass % s.effects.size();
-      s.active.clear();
-      const std::size_t end = k + 1 < s.effects.size() ? s.offset[k + 1] : s.coords.size();
-      for (std::size_t i = s.offset[k]; i < end; ++i)
-        if (s.coords[i].profile_points == 0) s.active.push_back(i);
-      if (s.active.empty()) continue;
-      search_space(s, opt);
-      s.base = s.best_z;
-    }
+    for (std::size_t pass = 0; pass < 2 * s.effects.size(); ++pass)
+      search_effect(s, pass % s.effects.size(), opt);
     s.active = s.searched();
     std::vector<double> zj = s.restrict_to_active(s.base);
     const int n_local =
@@ -724,8 +768,34 @@ nlopt_result search_valve(Search& s, const ModelFitOptions& opt) {
     s.base = neutral_point(s);
     s.active = s.searched();
   }
+  if (s.effects.size() == 1 && s.effects[0].name == "preisach") return search_effect(s, 0, opt);
   return search_space(s, opt);
 }
+
+namespace {
+
+// Bayes' criterion of a fit's simulated output over the estimation samples [t0, t1), with k
+// parameters, on n_eff independent samples (the residual is coloured: counting every sample
+// lets 40 more weights buy a few tenths of a point): how `preisach:auto` weighs Preisach
+// weights against four friction figures.
+double output_bic(const ModelFit& f, const std::vector<double>& y, std::size_t t0, std::size_t t1,
+                  double k, double n_eff) {
+  if (f.status == ModelFitStatus::NoStableModel || f.y_sim.size() != y.size() || t1 <= t0 + 1)
+    return std::numeric_limits<double>::infinity();
+  double sse = 0.0;
+  for (std::size_t t = t0; t < t1; ++t) sse += (y[t] - f.y_sim[t]) * (y[t] - f.y_sim[t]);
+  const double n = static_cast<double>(t1 - t0);
+  return n_eff * std::log(std::max(sse, 1e-300) / n) + k * std::log(n_eff);
+}
+
+double linear_parameter_count(const ModelFit& f) {
+  return static_cast<double>(f.a.size() + f.b.size()) + (f.disturbance.empty() ? 1.0 : 0.0);
+}
+
+ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                       const ModelSpec& spec, const ModelFitOptions& opt, ModelFit fit);
+
+}  // namespace
 
 ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                    const ModelSpec& spec, const ModelFitOptions& opt) {
@@ -738,12 +808,47 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
   auto finish = [&](ModelFit& f) {
     f.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   };
-  if (spec.has("preisach")) {
-    fit = fit_preisach(u, y, Ts, spec, opt, std::move(fit));
-    finish(fit);
-    return fit;
+  if (const EffectSpec* pe = spec.find("preisach"); pe && pe->variant != "position-dependent") {
+    ModelFit general = fit_preisach(u, y, Ts, spec, opt, fit);
+    if (pe->variant == "general") {
+      finish(general);
+      return general;
+    }
+    // auto: the general weights and the position-dependent friction, each fitted, the better
+    // by BIC over the estimation samples both simulate.
+    ModelSpec narrow = spec;
+    for (auto& e : narrow.effects)
+      if (e.name == "preisach") e.variant = "position-dependent";
+    ModelFit banded = fit_separable(u, y, Ts, narrow, opt, fit);
+    banded.spec = spec;
+    const std::size_t t0 = std::max(general.first_sample, banded.first_sample);
+    const std::size_t t1 = std::min(general.estimation_end, banded.estimation_end);
+    double n_eff = static_cast<double>(t1 > t0 ? t1 - t0 : 1);
+    if (banded.y_sim.size() == y.size() && t1 > t0 + 1) {
+      std::vector<double> e;
+      for (std::size_t t = t0; t < t1; ++t) e.push_back(y[t] - banded.y_sim[t]);
+      n_eff = std::max(effective_sample_size(e), 2.0);
+    }
+    const double bic_general = output_bic(
+        general, y, t0, t1,
+        linear_parameter_count(general) + effect_parameter_count("preisach", general, Ts), n_eff);
+    const double bic_banded = output_bic(
+        banded, y, t0, t1,
+        linear_parameter_count(banded) + effect_parameter_count("preisach", banded, Ts), n_eff);
+    ModelFit& won = bic_banded <= bic_general ? banded : general;
+    won.evaluations = general.evaluations + banded.evaluations;
+    finish(won);
+    return std::move(won);
   }
+  fit = fit_separable(u, y, Ts, spec, opt, std::move(fit));
+  finish(fit);
+  return fit;
+}
 
+namespace {
+
+ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& y, double Ts,
+                       const ModelSpec& spec, const ModelFitOptions& opt, ModelFit fit) {
   Problem p(u, y, Ts, spec, opt);
   const LinearOptions& lo = p.lo;
   const ArxEstimator& est = p.est;
@@ -825,7 +930,6 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
   if (!f.ok) {
     fit.status = ModelFitStatus::NoStableModel;
     fit.stop_reason = "no structure gave a stable linear part";
-    finish(fit);
     return fit;
   }
   fit.forced_stable = f.forced_stable;
@@ -844,9 +948,10 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
   if (fit.estimation_end < y.size())
     fit.validation_fitness_percent = fitness_percent(y, fit.y_sim, fit.estimation_end, y.size());
   describe_process_effects(fit, &est, Ts);
-  finish(fit);
   return fit;
 }
+
+}  // namespace
 
 BandInterval band_interval(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                            const ModelFit& fit, const std::string& effect,

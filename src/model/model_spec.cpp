@@ -70,7 +70,12 @@ const std::vector<EffectInfo>& effect_vocabulary() {
        {"he", "kano", "choudhury", "stenman"},
        "two-parameter stiction (He fs, fd; Kano or Choudhury S, J; Stenman d)"},
       {"deadband", EffectStage::Valve, {}, "backlash band d"},
-      {"preisach", EffectStage::Valve, {}, "general hysteresis: Preisach weights (core method)"},
+      {"preisach",
+       EffectStage::Valve,
+       {"auto", "general", "position-dependent"},
+       "hysteresis beyond two-parameter stiction: Preisach weights (general, the core method) "
+       "or He's friction with one level below a valve position and another above it "
+       "(position-dependent); auto fits both and keeps the better by BIC"},
       {"saturation", EffectStage::Valve, {}, "travel limits lower, upper"},
       {"characteristic",
        EffectStage::Valve,

@@ -41,6 +41,13 @@ std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputR
   // actuator's (a chain of lags is what more ARX orders stand for; least squares alone fits
   // high orders poorly under coloured noise).
   if (e.name == "order") return {{"lag", "s", 0.0, 60.0 * r.Ts}};
+  if (e.name == "preisach" && e.variant == "position-dependent")
+    return {{"fs", "OP", 0.0, R},
+            {"mild side", "", -1.0, 1.0},
+            {"fd/fs", "", 0.0, 1.0},
+            {"position", "OP", r.lo(), r.hi()},
+            {"motion at start", "", -1.0, 1.0, 3},
+            {"transition", "", 0.02, 1.0}};
   if (find_effect(e.name)) return {};
   throw std::invalid_argument("unknown effect '" + e.name + "'");
 }
@@ -73,6 +80,15 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
     return Characteristic(kind, std::exp(std::max(std::abs(k), kLinearCurvature)));
   }
   if (e.name == "actuator-lag" || e.name == "order") return ActuatorLag(std::max(th[0], 0.0), r.Ts);
+  if (e.name == "preisach" && e.variant == "position-dependent") {
+    const double fs = std::max(th[0], 0.0), c = std::clamp(th[1], -1.0, 1.0);
+    const double ratio = std::clamp(th[2], 0.0, 1.0);
+    const double half = std::max(std::clamp(th[5], 0.02, 1.0) * (r.hi() - r.lo()) / 2.0, 1e-6);
+    const double below = c > 0 ? (1.0 - c) * fs : fs, above = c < 0 ? (1.0 + c) * fs : fs;
+    return PositionDependentStiction(
+        {{th[3] - half, below, ratio * below}, {th[3] + half, above, ratio * above}},
+        std::round(std::clamp(th[4], -1.0, 1.0)));
+  }
   throw std::invalid_argument("effect '" + e.name + "' has no valve block to search");
 }
 
@@ -109,6 +125,22 @@ std::vector<NamedValue> block_parameters(const ValveEffect& block) {
                },
                [](const ActuatorLag& b) -> std::vector<NamedValue> {
                  return {{"tau", b.tau(), "s"}};
+               },
+               [](const PositionDependentStiction& b) -> std::vector<NamedValue> {
+                 // fs, fd: where the valve sticks most (what its stiction figures count);
+                 // the other side's as fs_mild, fd_mild; `position` where friction changes.
+                 const auto& p = b.points();
+                 const auto by_fs = [](const auto& x, const auto& y) { return x.fs < y.fs; };
+                 const auto severe = std::max_element(p.begin(), p.end(), by_fs);
+                 const auto mild = std::min_element(p.begin(), p.end(), by_fs);
+                 return {{"fs", severe->fs, "OP"},
+                         {"fd", severe->fd, "OP"},
+                         {"fs_mild", mild->fs, "OP"},
+                         {"fd_mild", mild->fd, "OP"},
+                         {"position", (p.front().position + p.back().position) / 2.0, "OP"},
+                         {"transition", p.back().position - p.front().position, "OP"},
+                         {"severe_above", severe > mild ? 1.0 : 0.0, ""},
+                         {"initial_motion", b.initial_motion(), ""}};
                },
                [](const auto&) -> std::vector<NamedValue> { return {}; }},
       block);

@@ -228,7 +228,7 @@ ModelFit model_fit_of(const IdentificationResult& r, const std::vector<double>& 
                       const std::vector<double>& y, double Ts) {
   (void)Ts;
   ModelFit f;
-  f.spec = parse_model_spec("preisach");
+  f.spec = parse_model_spec("preisach:general");
   f.first_sample = r.first_sample;
   f.estimation_end = r.estimation_end;
   f.elapsed_s = r.elapsed_s;
@@ -253,7 +253,7 @@ ModelFit model_fit_of(const IdentificationResult& r, const std::vector<double>& 
   int nonzero = 0;
   for (double v : m.mu) nonzero += v > 0;
   f.effects.push_back({"preisach",
-                       "",
+                       "general",
                        {{"L", static_cast<double>(m.grid.L), "levels"},
                         {"nonzero_weights", static_cast<double>(nonzero), ""},
                         {"umin", m.grid.umin, "OP"},

@@ -125,8 +125,11 @@ double StenmanStiction::step(double u) {
 }
 
 // ---------------------------------------------------------------------------------------------
-PositionDependentStiction::PositionDependentStiction(std::vector<Point> points)
-    : points_(std::move(points)) {
+PositionDependentStiction::PositionDependentStiction(std::vector<Point> points,
+                                                     double initial_motion)
+    : points_(std::move(points)), initial_motion_(initial_motion) {
+  require(std::isfinite(initial_motion) && std::abs(initial_motion) <= 1.0,
+          "stiction (position-dependent): the initial motion must lie in [-1, 1]");
   require(!points_.empty(), "stiction (position-dependent): needs at least one point");
   for (std::size_t i = 0; i < points_.size(); ++i) {
     const Point& p = points_[i];

@@ -23,7 +23,8 @@ double param(const std::vector<NamedValue>& p, const char* name) {
 }  // namespace
 
 // The friction figures of the fitted valve, in OP units: He (fs, fs - fd), Kano (S, J),
-// Stenman (d: band, jump d), deadband (d, no jump); a Preisach valve through He's figures fitted
+// Stenman (d: band, jump d), deadband (d, no jump), position-dependent friction (He's figures
+// where it sticks most); a Preisach valve through He's figures fitted
 // to its response on the data's own OP (stiction_quantification.hpp).
 FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
                            const std::vector<double>& pv, const OpRange& range, int threads,
@@ -52,7 +53,8 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
   std::string sized;  // the effect the band comes from
   for (const auto& e : fit.effects) {
     double band = FrictionSize::kNaN, jump = FrictionSize::kNaN;
-    if (e.name == "stiction") {
+    // Position-dependent friction (preisach) gives He's figures where the valve sticks most.
+    if (e.name == "stiction" || (e.name == "preisach" && !std::isnan(param(e.parameters, "fs")))) {
       if (!std::isnan(param(e.parameters, "fs"))) {
         band = param(e.parameters, "fs");
         jump = band - param(e.parameters, "fd");

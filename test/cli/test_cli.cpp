@@ -317,7 +317,9 @@ TEST_CASE("diagnose reads friction from a recorded valve position") {
   std::ifstream g(tmp("nomv.json"));
   const auto k = nlohmann::json::parse(g);
   CHECK(k["valve_travel"]["tested"] == false);
-  CHECK(k["verdict"] == "stiction");  // the closed-loop models alone (README: simulated loops)
+  // The closed-loop models alone take this process's second lag for a valve with memory (a
+  // false call docs/diagnosis.md counts); the recorded position is what clears it.
+  CHECK((k["verdict"] == "stiction" || k["verdict"] == "deadband"));
   // A sticky valve with its position recorded: He's figures from OP -> MV.
   REQUIRE(run("simulate --scenario stenman --seed 1 --out " + tmp("sten.csv")).status == 0);
   auto s = run("diagnose " + tmp("sten.csv") + " --auto --no-history --json " + tmp("sten.json"));

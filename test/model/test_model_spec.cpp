@@ -106,6 +106,12 @@ TEST_CASE("preisach replaces the stiction or deadband it generalizes, and says w
   REQUIRE(replaced.size() == 2);
   CHECK(replaced[0].name == "stiction");
   CHECK(replaced[1].name == "deadband");
+  // A variant of preisach replaces them the same way, and is kept.
+  CHECK(to_string(add_effect(st, "preisach:position-dependent")) ==
+        "preisach:position-dependent+integrator");
+  CHECK(parse_effect("preisach").variant == "auto");
+  CHECK(to_string(parse_model_spec("preisach:auto")) == "preisach");
+  CHECK(to_string(parse_model_spec("preisach:general+delay")) == "preisach:general+delay");
   // Nothing to replace: the list is emptied, not left from the last call.
   CHECK(to_string(add_effect(parse_model_spec("linear"), "preisach", &replaced)) == "preisach");
   CHECK(replaced.empty());

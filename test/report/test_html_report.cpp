@@ -184,7 +184,7 @@ struct Fixture {
 }  // namespace
 
 TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all text escaped") {
-  Fixture fx("paper-ex1", "preisach", 1500);
+  Fixture fx("paper-ex1", "preisach:general", 1500);
   REQUIRE(!fx.where.intervals.empty());
   const HtmlReport r = html_report(fx.content());
   const std::string& h = r.html;
@@ -214,7 +214,7 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
 }
 
 TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
-  Fixture fx("paper-ex1", "preisach", 1500);
+  Fixture fx("paper-ex1", "preisach:general", 1500);
   Diagnosis dg;
   dg.steps.push_back({fx.fit, fx.where, {}});
   dg.limit_cycle.oscillating = true;
@@ -229,7 +229,7 @@ TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
 }
 
 TEST_CASE("a recorded valve position: its signature beside the model's, and the test's row") {
-  Fixture fx("paper-ex1", "preisach", 1500);
+  Fixture fx("paper-ex1", "preisach:general", 1500);
   REQUIRE(fx.d.has_mv());
   Diagnosis dg;
   dg.steps.push_back({fx.fit, fx.where, {}});

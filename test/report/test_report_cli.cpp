@@ -61,7 +61,7 @@ std::string sticky_loop(const std::string& name) {
 TEST_CASE("report on a simulated sticky loop: one self-contained page with every plot") {
   const std::string csv = sticky_loop("sticky.csv"), out = tmp("sticky.html");
   std::filesystem::remove(out);
-  const Run r = run("report " + csv + " --model preisach --out " + out);
+  const Run r = run("report " + csv + " --model preisach:general --out " + out);
   INFO(r.out);
   REQUIRE(r.status == 0);
   CHECK(r.out.find("wrote " + out) != std::string::npos);
@@ -78,14 +78,14 @@ TEST_CASE("report on a simulated sticky loop: one self-contained page with every
   CHECK(h.find("id=\"where-intervals\"") != std::string::npos);
   CHECK(h.find("id=\"findings\"") != std::string::npos);  // the diagnosis ran
   CHECK(h.find("id=\"ladder-table\"") != std::string::npos);
-  CHECK(h.find("<code>preisach</code>") != std::string::npos);
+  CHECK(h.find("<code>preisach:general</code>") != std::string::npos);
   CHECK(h.find("% on validation data") != std::string::npos);
   // The fit entered the model history; the next report takes the ladder's last model.
   CHECK(std::filesystem::exists(csv + ".history.json"));
   const Run again = run("report " + csv + " --no-diagnose --out " + tmp("again.html"));
   INFO(again.out);
   CHECK(again.status == 0);
-  CHECK(again.out.find("model preisach (the last model of this data's ladder)") !=
+  CHECK(again.out.find("model preisach:general (the last model of this data's ladder)") !=
         std::string::npos);
   const std::string h2 = slurp(tmp("again.html"));
   CHECK(h2.find("Not diagnosed") != std::string::npos);

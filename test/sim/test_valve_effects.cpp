@@ -170,6 +170,20 @@ TEST_CASE("Position-dependent stiction") {
     }
     CHECK(first_move == doctest::Approx(61.5).epsilon(0.001));
   }
+  SUBCASE("the motion at the start, as He's: the valve lags OP by the band where it starts") {
+    PositionDependentStiction up({{20.0, 8.0, 3.0}, {40.0, 1.5, 0.5}}, 1.0);
+    CHECK(up.initial_motion() == 1.0);
+    up.reset(10.0);
+    CHECK(up.output() == doctest::Approx(7.0));  // fd 3 below 20 %
+    PositionDependentStiction down({{20.0, 8.0, 3.0}, {40.0, 1.5, 0.5}}, -1.0);
+    down.reset(60.0);
+    CHECK(down.output() == doctest::Approx(60.5));  // fd 0.5 above 40 %
+    // Moving up already (residual force fd): it slips after fs - fd more, not 2 fs.
+    up.reset(10.0);
+    CHECK(up.step(14.9) == doctest::Approx(7.0));
+    CHECK(up.step(15.1) == doctest::Approx(12.1));
+    CHECK_THROWS_AS(PositionDependentStiction({{0.0, 1.0, 0.5}}, 1.5), std::invalid_argument);
+  }
   CHECK_THROWS_AS(PositionDependentStiction({{40.0, 1.0, 0.5}, {20.0, 2.0, 1.0}}),
                   std::invalid_argument);
   CHECK_THROWS_AS(PositionDependentStiction({{40.0, 1.0, 2.0}}), std::invalid_argument);

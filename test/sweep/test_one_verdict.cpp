@@ -137,7 +137,7 @@ TEST_CASE("one verdict: diagnose, diagnose --auto, report, sweep and fit --verdi
     const test::CliResult rep = run({"report", csv, "--no-plots", "--no-history", "--out", page});
     INFO(rep.out);
     REQUIRE(rep.status == 0);
-    CHECK(rep.out.find("note: model preisach (no model history for this data yet)") !=
+    CHECK(rep.out.find("note: model preisach:general (no model history for this data yet)") !=
           std::string::npos);
     CHECK(verdict_line(rep.out) == v);
     CHECK(page_verdict(read_text(page)) == v);
@@ -184,7 +184,8 @@ TEST_CASE("one verdict: a model history on disk does not change report's verdict
     CHECK(page_verdict(read_text(page)) == verdict_line(r.out));
     return verdict_line(r.out);
   };
-  const std::string first = report("note: model preisach (no model history for this data yet)");
+  const std::string first =
+      report("note: model preisach:general (no model history for this data yet)");
   REQUIRE(!first.empty());
   REQUIRE(!fs::exists(csv + ".history.json"));
 

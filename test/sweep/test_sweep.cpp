@@ -130,7 +130,7 @@ TEST_CASE("friction_size: a Preisach valve's band and He's come with their inter
   o.preisach_L_min = 16;
   o.preisach_L_max = 16;
   const double Ts = d.sample_period();
-  const ModelFit p = fit_model(d.op, d.pv, Ts, parse_model_spec("preisach"), o);
+  const ModelFit p = fit_model(d.op, d.pv, Ts, parse_model_spec("preisach:general"), o);
   REQUIRE(p.preisach.has_value());
   const FrictionSize a = friction_size(p, d.op, d.pv);
   CHECK(a.band_percent == doctest::Approx(8.4).epsilon(0.2));
