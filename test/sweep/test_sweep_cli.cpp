@@ -227,22 +227,33 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
 TEST_CASE("sweep over the Tennessee Eastman runs: the sticking fault is stiction, normal is not") {
   const std::string te = std::string(VALVEDIAG_DATA_DIR) + "/tennessee-eastman/";
   const std::string out = (kTmp / "te.json").string();
-  const test::CliResult r = run({"sweep", te + "m1d00.mat", te + "m1d14.mat", "--op", "51", "--pv",
-                                 "21", "--sample-period", "36", "--json", out},
-                                600.0);
+#ifdef VALVEDIAG_SANITIZED
+  // The faulty run only: the .mat reader and a stick-slip climb; the normal run's verdict is a
+  // figure, checked in Release.
+  const std::vector<std::string> files{te + "m1d14.mat"};
+#else
+  const std::vector<std::string> files{te + "m1d00.mat", te + "m1d14.mat"};
+#endif
+  std::vector<std::string> args{"sweep"};
+  args.insert(args.end(), files.begin(), files.end());
+  for (const char* a : {"--op", "51", "--pv", "21", "--sample-period", "36", "--json"})
+    args.emplace_back(a);
+  args.push_back(out);
+  const test::CliResult r = run(args, 600.0);
   INFO(r.out);
   REQUIRE(r.status == 0);
   const nlohmann::json j = read_json(out);
   const nlohmann::json* faulty = loop_in(j, "m1d14");
-  const nlohmann::json* normal = loop_in(j, "m1d00");
   REQUIRE(faulty != nullptr);
-  REQUIRE(normal != nullptr);
   CHECK((*faulty)["verdict"] == "stiction");
   CHECK((*faulty)["limit_cycle"]["stick_slip"] == true);
   // The apparent band (% of travel): TE's valve jumps once OP is 2 % away from it.
   CHECK((*faulty)["stiction_percent"].get<double>() > 1.5);
   CHECK((*faulty)["stiction_percent"].get<double>() < 4.0);
   CHECK((*faulty)["health"]["oscillating"] == true);
+  if (files.size() == 1) return;
+  const nlohmann::json* normal = loop_in(j, "m1d00");
+  REQUIRE(normal != nullptr);
   CHECK((*normal)["verdict"] == "no-valve-problem");
   CHECK((*normal)["limit_cycle"]["stick_slip"] == false);
 }
