@@ -1,6 +1,7 @@
 // Autocorrelation of a record and what it implies for tests on it. Standard library and Eigen.
 #pragma once
 
+#include <cstddef>
 #include <vector>
 
 namespace valvediag {
@@ -14,5 +15,8 @@ std::vector<double> autocorrelation(const std::vector<double>& x);
 // 1. A likelihood-ratio test on N correlated samples counts each one as new evidence; on N / tau
 // it does not take a slow load's wander, seen hundreds of times over, for hundreds of proofs.
 double effective_sample_size(const std::vector<double>& residual);
+// The same for the residual y - y_sim over samples [t0, t1) (both the same length, t1 <= size).
+double effective_sample_size(const std::vector<double>& y, const std::vector<double>& y_sim,
+                             std::size_t t0, std::size_t t1);
 
 }  // namespace valvediag

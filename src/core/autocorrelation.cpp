@@ -38,4 +38,12 @@ double effective_sample_size(const std::vector<double>& residual) {
   return std::max(1.0, N / tau);
 }
 
+double effective_sample_size(const std::vector<double>& y, const std::vector<double>& y_sim,
+                             std::size_t t0, std::size_t t1) {
+  std::vector<double> e;
+  e.reserve(t1 > t0 ? t1 - t0 : 0);
+  for (std::size_t t = t0; t < t1; ++t) e.push_back(y[t] - y_sim[t]);
+  return effective_sample_size(e);
+}
+
 }  // namespace valvediag

@@ -343,10 +343,8 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       const bool over_trial = nf.estimation_gain_percent > 0;  // else: over the model
       const ModelFit& ref = over_trial ? nt : step.fit;
       if (beyond > 0 && ref.y_sim.size() == y.size() && ref.estimation_end > ref.first_sample + 1) {
-        std::vector<double> e;
-        for (std::size_t t = ref.first_sample; t < ref.estimation_end; ++t)
-          e.push_back(y[t] - ref.y_sim[t]);
-        const double n_eff = effective_sample_size(e);
+        const double n_eff =
+            effective_sample_size(y, ref.y_sim, ref.first_sample, ref.estimation_end);
         const double ratio = std::max(100.0 - pr->trial_fitness_percent, 1e-9) /
                              std::max(100.0 - ref.fitness_percent, 1e-9);
         const ModelFit& pt = fits[static_cast<std::size_t>(pr - step.findings.data())];

@@ -311,10 +311,7 @@ std::vector<double> neutral_point(const Search& s) {
 double residual_samples(const Search& s, const std::vector<double>& y, const std::vector<double>& x,
                         const LinearFit& f) {
   if (!f.ok) return 0.0;
-  const std::vector<double> ys = s.est.simulate(f, x);
-  std::vector<double> e;
-  for (std::size_t t = s.est.start(); t < s.est.end(); ++t) e.push_back(y[t] - ys[t]);
-  return effective_sample_size(e);
+  return effective_sample_size(y, s.est.simulate(f, x), s.est.start(), s.est.end());
 }
 
 void widen_unsupported_limits(const Search& s, const std::vector<double>& y,
@@ -483,7 +480,7 @@ struct Problem {
   static InputRange input_range(const std::vector<double>& u, double Ts) {
     const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
     std::vector<double> v(u);
-    const auto at = [&v](double q) {
+    const auto at = [&v](double q) {  // rank truncated, as the benchmark figures were measured
       const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(v.size() - 1));
       std::nth_element(v.begin(), v.begin() + k, v.end());
       return v[static_cast<std::size_t>(k)];
@@ -712,9 +709,6 @@ LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, 
   return lo;
 }
 
-// The valve coordinates' search: one effect alone by search_space; composed chains each effect
-// first on its own (the others at rest), then a joint polish of all coordinates from there (a
-// joint grid is too coarse in 4 or more dimensions). The best point is left in s.best_z.
 // Effect k's coordinates searched from s.base (the others held there); s.best_z holds the best
 // point seen. Position-dependent friction in three stages, each from the best point before: one
 // level everywhere (He's fs and fd/fs: the two-parameter stiction it nests), then where and how
@@ -752,6 +746,9 @@ nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt)
   return stage(std::move(active), opt);
 }
 
+// The valve coordinates' search: one effect alone by search_space; composed chains each effect
+// first on its own (the others at rest), then a joint polish of all coordinates from there (a
+// joint grid is too coarse in 4 or more dimensions). The best point is left in s.best_z.
 nlopt_result search_valve(Search& s, const ModelFitOptions& opt) {
   if (s.effects.size() > 1) {
     s.base = neutral_point(s);
@@ -777,7 +774,7 @@ namespace {
 // Bayes' criterion of a fit's simulated output over the estimation samples [t0, t1), with k
 // parameters, on n_eff independent samples (the residual is coloured: counting every sample
 // lets 40 more weights buy a few tenths of a point): how `preisach:auto` weighs Preisach
-// weights against four friction figures.
+// weights against five friction figures.
 double output_bic(const ModelFit& f, const std::vector<double>& y, std::size_t t0, std::size_t t1,
                   double k, double n_eff) {
   if (f.status == ModelFitStatus::NoStableModel || f.y_sim.size() != y.size() || t1 <= t0 + 1)
@@ -824,11 +821,8 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
     const std::size_t t0 = std::max(general.first_sample, banded.first_sample);
     const std::size_t t1 = std::min(general.estimation_end, banded.estimation_end);
     double n_eff = static_cast<double>(t1 > t0 ? t1 - t0 : 1);
-    if (banded.y_sim.size() == y.size() && t1 > t0 + 1) {
-      std::vector<double> e;
-      for (std::size_t t = t0; t < t1; ++t) e.push_back(y[t] - banded.y_sim[t]);
-      n_eff = std::max(effective_sample_size(e), 2.0);
-    }
+    if (banded.y_sim.size() == y.size() && t1 > t0 + 1)
+      n_eff = std::max(effective_sample_size(y, banded.y_sim, t0, t1), 2.0);
     const double bic_general = output_bic(
         general, y, t0, t1,
         linear_parameter_count(general) + effect_parameter_count("preisach", general, Ts), n_eff);
