@@ -206,6 +206,19 @@ TEST_CASE("records the valve-travel test refuses or reads as stuck") {
   }
 }
 
+TEST_CASE("an MV that equals OP leaves friction nothing to explain, not a ratio of roundings") {
+  // As the simulator writes a linear valve's MV: OP itself. The follow model's error is rounding;
+  // the share friction removes of it is none (it read -6e13 %).
+  const LoopData d = run_scenario(scenario_by_name("kano"), 1, 1000);
+  const ValveTravel v = check_valve_travel(d.op, d.op, 1.0);
+  INFO(v.summary);
+  CHECK(v.decided);
+  CHECK(v.verdict == "no-valve-problem");
+  CHECK(v.error_share == doctest::Approx(0.0));
+  CHECK(v.validation_error_share == doctest::Approx(0.0));
+  CHECK(has(v.summary, "explains only 0 / 0 %"));
+}
+
 TEST_CASE("friction that explains one part of the record only leaves the verdict to the models") {
   // Kano's valve, seed 3, as `simulate` writes it: friction removes three quarters of the error on
   // the estimation part and a sixth held out. That is no evidence the valve follows OP (which
