@@ -9,6 +9,7 @@
 
 #include "commands.hpp"
 #include "data_options.hpp"
+#include "valvediag/atomic_file.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/html_report.hpp"
 #include "valvediag/loop_verdict.hpp"
@@ -19,16 +20,14 @@ namespace valvediag::cli {
 
 void check_report_writable(const std::string& path) {
   if (path.empty()) throw UsageError("--out: give the HTML file to write");
-  const std::string probe = path + ".partial";
-  {
-    std::ofstream f(probe, std::ios::binary);
-    if (!f)
-      throw UsageError("cannot write the report to " + path +
-                       ": check that the directory exists and is writable");
-  }
-  std::remove(probe.c_str());
   if (std::filesystem::is_directory(path))
     throw UsageError("--out " + path + " is a directory: give a file name, e.g. report.html");
+  try {
+    AtomicFile probe(path);  // not committed: removed, the path untouched
+  } catch (const std::runtime_error& e) {
+    throw UsageError("cannot write the report to " + path +
+                     ": check that the directory exists and is writable (" + e.what() + ")");
+  }
 }
 
 ReportFile write_report_file(const std::string& path, const ReportContent& content,
@@ -37,25 +36,7 @@ ReportFile write_report_file(const std::string& path, const ReportContent& conte
 }
 
 ReportFile write_page_file(const std::string& path, const HtmlReport& rep) {
-  const std::string partial = path + ".partial";
-  {
-    std::ofstream f(partial, std::ios::binary);
-    if (!f)
-      throw UsageError("cannot write the report to " + path +
-                       ": check that the directory exists and is writable");
-    f << rep.html;
-    f.close();
-    if (!f) {
-      std::remove(partial.c_str());
-      throw std::runtime_error("writing " + path + " failed (disk full?)");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(partial, path, ec);
-  if (ec) {
-    std::remove(partial.c_str());
-    throw std::runtime_error("cannot write " + path + ": " + ec.message());
-  }
+  write_file_atomically(path, rep.html);
   return {rep.html.size(), rep.plots.size(), rep.plot_seconds, rep.warnings};
 }
 

@@ -18,6 +18,7 @@
 #include "isolated_jobs.hpp"
 #include "isolated_mat_reader.hpp"
 #include "stop_signal.hpp"
+#include "valvediag/atomic_file.hpp"
 #include "valvediag/bus_factory.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/html_report.hpp"
@@ -191,12 +192,12 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
 }
 
 void write_file(const std::string& path, const std::string& text) {
-  // Through a temporary file: a results file is either whole or absent.
-  const std::string tmp = path + ".tmp";
-  write_text(tmp, text);
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) throw UsageError(path + ": cannot write: " + ec.message());
+  // A results file is either whole or absent.
+  try {
+    write_file_atomically(path, text);
+  } catch (const std::runtime_error& e) {
+    throw UsageError(e.what());
+  }
 }
 
 void write_outputs(const SweepArgs& a, const SweepInfo& info,

@@ -3,6 +3,7 @@
 #include <fstream>
 #include <stdexcept>
 
+#include "valvediag/atomic_file.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/fit_report.hpp"
@@ -54,12 +55,7 @@ void write_series(const std::string& path, const LoopData& d, const FitRun& run)
 }
 
 void write_text(const std::string& path, const std::string& text) {
-  std::ofstream f(path, std::ios::binary);
-  if (!f)
-    throw std::runtime_error("cannot write " + path +
-                             ": check the directory exists and is writable");
-  f << text;
-  if (!f) throw std::runtime_error("writing " + path + " failed (disk full?)");
+  write_file_atomically(path, text);
 }
 
 }  // namespace valvediag::cli

@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <system_error>
 
+#include "valvediag/atomic_file.hpp"
+
 namespace valvediag {
 namespace {
 
@@ -36,17 +38,15 @@ void write_table(const std::string& path, const std::vector<std::string>& names,
       fail(path, "column '" + names[c] + "' has " + std::to_string(columns[c]->size()) +
                      " values, column '" + names[0] + "' has " + std::to_string(rows));
 
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  if (f == nullptr) fail(path, std::generic_category().message(errno));
+  AtomicFile f(path);  // whole or absent, never through a planted link
   std::string out;
   for (std::size_t c = 0; c < names.size(); ++c) {
     if (c) out += ',';
     out += quoted_name(names[c]);
   }
   out += '\n';
-  bool ok = true;
   char buf[32];
-  for (std::size_t r = 0; r < rows && ok; ++r) {
+  for (std::size_t r = 0; r < rows; ++r) {
     for (std::size_t c = 0; c < columns.size(); ++c) {
       if (c) out += ',';
       // Shortest text that reads back to the same double.
@@ -55,14 +55,12 @@ void write_table(const std::string& path, const std::vector<std::string>& names,
     }
     out += '\n';
     if (out.size() >= (1u << 20)) {
-      ok = std::fwrite(out.data(), 1, out.size(), f) == out.size();
+      f.write(out);
       out.clear();
     }
   }
-  if (ok) ok = std::fwrite(out.data(), 1, out.size(), f) == out.size();
-  const int saved = errno;
-  const bool closed = std::fclose(f) == 0;
-  if (!ok || !closed) fail(path, std::generic_category().message(ok ? errno : saved));
+  f.write(out);
+  f.commit();
 }
 
 }  // namespace

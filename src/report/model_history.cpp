@@ -8,6 +8,8 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
+#include "valvediag/atomic_file.hpp"
+
 namespace valvediag {
 
 std::string history_path_for(const std::string& data_path) {
@@ -35,6 +37,10 @@ std::string utc_timestamp() {
 }
 
 std::vector<HistoryEntry> load_history(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw std::runtime_error("cannot write the model history " + path +
+                             ": a folder has its name; move it away");
   std::ifstream f(path);
   if (!f) return {};
   std::vector<HistoryEntry> out;
@@ -83,17 +89,7 @@ void append_history(const std::string& path, const std::vector<HistoryEntry>& en
                             {"command", h.command},
                             {"time", h.time}});
   }
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary);
-    if (!f)
-      throw std::runtime_error("cannot write the model history " + tmp +
-                               ": is the data's folder writable?");
-    f << j.dump(2) << "\n";
-    if (!f) throw std::runtime_error("writing the model history " + tmp + " failed (disk full?)");
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0)
-    throw std::runtime_error("cannot replace the model history " + path);
+  write_file_atomically(path, j.dump(2) + "\n");
 }
 
 bool try_append_history(const std::string& path, const std::vector<HistoryEntry>& entries,
@@ -102,9 +98,6 @@ bool try_append_history(const std::string& path, const std::vector<HistoryEntry>
     append_history(path, entries);
     return true;
   } catch (const std::exception& e) {
-    std::error_code ec;  // a partial temporary file is not left behind
-    if (std::filesystem::is_regular_file(path + ".tmp", ec))
-      std::filesystem::remove(path + ".tmp", ec);
     why = e.what();
     return false;
   }

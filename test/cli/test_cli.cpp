@@ -374,20 +374,31 @@ TEST_CASE("diagnose reads friction from a recorded valve position") {
 }
 
 TEST_CASE("a model history that cannot be written is a warning: the result stands") {
-  // A read-only data folder (a share, ../shared in CI): stand-in, the temporary file's name is
-  // taken by a directory, so the history cannot be written there (root ignores permissions).
+  // A read-only data folder (a share, ../shared in CI): stand-in, the history's name is taken by
+  // a folder, so the history cannot be written there (root ignores permissions).
   const std::string csv = tmp("ro.csv");
   REQUIRE(run("simulate --scenario paper-ex1-linear --samples 600 --out " + csv).status == 0);
-  std::remove((csv + ".history.json").c_str());
-  fs::create_directories(csv + ".history.json.tmp");
+  fs::remove_all(csv + ".history.json");
+  fs::create_directories(csv + ".history.json");
   auto r = run("fit " + csv + " --model linear");
   CHECK(r.status == 0);
   CHECK(r.out.find("fitness:") != std::string::npos);
-  CHECK(r.out.find("warning: cannot write the model history") != std::string::npos);
+  CHECK(r.out.find("warning: cannot write the model history " + csv + ".history.json") !=
+        std::string::npos);
   CHECK(r.out.find("--no-history") != std::string::npos);
-  CHECK(fs::is_directory(csv + ".history.json.tmp"));  // not removed: it is not ours
-  CHECK_FALSE(fs::exists(csv + ".history.json"));
+  CHECK(fs::is_empty(csv + ".history.json"));  // not removed, nothing written in it
+  fs::remove(csv + ".history.json");
+  // Nor is a planted link at the old temporary name written through.
+  std::ofstream(tmp("victim.txt")) << "keep";
+  fs::create_symlink(tmp("victim.txt"), csv + ".history.json.tmp");
+  CHECK(run("fit " + csv + " --model linear").status == 0);
+  std::ifstream victim(tmp("victim.txt"));
+  std::string kept;
+  victim >> kept;
+  CHECK(kept == "keep");
+  CHECK(fs::is_regular_file(csv + ".history.json"));
   fs::remove(csv + ".history.json.tmp");
+  fs::remove(csv + ".history.json");
 }
 
 TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
