@@ -12,6 +12,7 @@
 #include <system_error>
 
 #include "time_parse.hpp"
+#include "valvediag/data_checks.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/text_stats.hpp"
 
@@ -508,6 +509,9 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
     const Num r = parse_number(cells[c.index], decimal, numbuf, v);
     if (r != Num::ok)
       throw DataError(file, lines.number(), c.name, number_problem(r, cells[c.index], decimal),
+                      c.role);
+    if (std::abs(v) > kMaxSignalMagnitude)
+      throw DataError(file, lines.number(), c.name, signal_value_problem(v, show(cells[c.index])),
                       c.role);
     out.push_back(v);
   };

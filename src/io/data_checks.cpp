@@ -18,7 +18,23 @@ void check_finite(const LoopData& d, const std::vector<double>& v, const char* n
                           " (NaN or infinite values cannot be used)");
 }
 
+void check_signal(const LoopData& d, const std::vector<double>& v, const char* name) {
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (const std::string why = signal_value_problem(v[i]); !why.empty())
+      throw DataError(d.source, 0, name, "sample " + std::to_string(i + 1) + ": " + why);
+}
+
 }  // namespace
+
+std::string signal_value_problem(double v, std::string_view shown) {
+  const std::string value = shown.empty() ? num6g(v) : std::string(shown);
+  if (!std::isfinite(v)) return value + " is NaN or infinite (remove the row or fill it in)";
+  if (std::abs(v) > kMaxSignalMagnitude)
+    return value +
+           " is no measurement (beyond +-1e12 in any unit: a historian's bad-value marker or a "
+           "corrupt cell; remove the row or fill it in)";
+  return {};
+}
 
 void check_loop_data(const LoopData& d) {
   const std::size_t n = d.t.size();
@@ -33,10 +49,10 @@ void check_loop_data(const LoopData& d) {
   same_size(d.sp, "sp", true);
   same_size(d.mv, "mv", true);
   check_finite(d, d.t, "t");
-  check_finite(d, d.op, "op");
-  check_finite(d, d.pv, "pv");
-  check_finite(d, d.sp, "sp");
-  check_finite(d, d.mv, "mv");
+  check_signal(d, d.op, "op");
+  check_signal(d, d.pv, "pv");
+  check_signal(d, d.sp, "sp");
+  check_signal(d, d.mv, "mv");
   for (std::size_t i = 1; i < n; ++i)
     if (!(d.t[i] > d.t[i - 1]))
       throw DataError(d.source, 0, "t",

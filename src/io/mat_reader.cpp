@@ -17,6 +17,7 @@
 #include <mutex>
 #include <string_view>
 
+#include "valvediag/data_checks.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/text_stats.hpp"
 
@@ -691,9 +692,8 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
       throw fail(std::string(name) + " has " + std::to_string(v.size()) + " samples but op has " +
                  std::to_string(d.op.size()) + " (the series must be aligned)");
     for (std::size_t i = 0; i < v.size(); ++i)
-      if (!std::isfinite(v[i]))
-        throw fail(std::string(name) + " sample " + std::to_string(i + 1) + " is " + num6g(v[i]) +
-                   " (NaN or infinite values cannot be used)");
+      if (const std::string why = signal_value_problem(v[i]); !why.empty())
+        throw fail(std::string(name) + " sample " + std::to_string(i + 1) + ": " + why);
   };
   check(d.op, "op");
   check(d.pv, "pv");

@@ -308,8 +308,11 @@ TEST_CASE("resampling edge cases") {
   CHECK(std::string(parse_error("t,op,pv\n4,3,9\n6,3,9\n6.5,2,3\n", o).what()) ==
         "data.csv: column 'op': constant at 3 in all 2 resampled samples: nothing to identify (is "
         "--op the controller output?)");
-  // b - a overflows between huge values of opposite sign; the result must stay finite.
-  const LoopData d = parse("t,op,pv\n0,0,1\n1,1,-1.7e308\n3,2,1.7e308\n", o);
+  // b - a overflowed between huge values of opposite sign: such cells are refused by name now,
+  // before any arithmetic.
+  CHECK(std::string(parse_error("t,op,pv\n0,0,1\n1,1,-1.7e308\n3,2,1.7e308\n", o).what())
+            .find("data.csv:3: column 'pv': '-1.7e308' is no measurement") == 0);
+  const LoopData d = parse("t,op,pv\n0,0,1\n1,1,-1e12\n3,2,1e12\n", o);
   CHECK(d.t == std::vector<double>{0, 2});
   CHECK(d.op == std::vector<double>{0, 1.5});
   CHECK(d.pv == std::vector<double>{1, 0});
@@ -412,6 +415,14 @@ TEST_CASE("bad input: every message names file, line and column") {
   CHECK(what("t,op,pv\n0,1,2\n1,2,1e999\n") ==
         "data.csv:3: column 'pv': '1e999' is out of the range of a double (fix the cell or remove "
         "the row)");
+  // Finite but no measurement: a historian's bad-value marker (it hung the estimators).
+  CHECK(what("t,op,pv\n0,1,2\n1,1e308,3\n") ==
+        "data.csv:3: column 'op': '1e308' is no measurement (beyond +-1e12 in any unit: a "
+        "historian's bad-value marker or a corrupt cell; remove the row or fill it in)");
+  CHECK(what("t,op,pv\n0,1,2\n1,2,-3.4e38\n")
+            .find("data.csv:3: column 'pv': '-3.4e38' is no "
+                  "measurement") == 0);
+  CHECK(parse("t,op,pv\n0,1,2\n1,2,9.9e11\n").pv.back() == 9.9e11);
   CHECK(what("t,op,pv\n0,1,2\n1,,3\n") ==
         "data.csv:3: column 'op': the cell is empty (fill the gap or remove the row)");
   CHECK(what("t,op,pv\n0,1,2\n1,2\n") ==

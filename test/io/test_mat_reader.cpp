@@ -250,7 +250,8 @@ TEST_CASE("files written here: struct arrays, cells, top-level loops, every form
                      {"PV", mat_column(s.pv)},
                      {"Ts", mat_numeric({1, 2}, 1, 2)}},
                     {{"OP", mat_column(s.op)}, {"PV", mat_column(s.pv)}, {"Ts", nullptr}}})});
-    CHECK(has(error_of([&] { read_mat_loop(path, "bad(1)"); }), "op sample 8 is nan"));
+    CHECK(has(error_of([&] { read_mat_loop(path, "bad(1)"); }),
+              "op sample 8: nan is NaN or infinite"));
     CHECK(
         has(error_of([&] { read_mat_loop(path, "bad(2)"); }), "pv has 100 samples but op has 400"));
     CHECK(has(error_of([&] { read_mat_loop(path, "bad(3)"); }), "field Ts must be one positive"));

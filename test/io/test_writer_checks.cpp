@@ -37,7 +37,7 @@ LoopData sample_loop() {
   LoopData d;
   d.source = "sim";
   d.t = {0, 0.1, 0.2, 0.30000000000000004};
-  d.op = {1.0 / 3.0, -2.5e-300, 1e300, 42};
+  d.op = {1.0 / 3.0, -2.5e-300, -9.87654321e11, 42};
   d.pv = {0.1, 0.2, 0.3, -0.0};
   d.sp = {5, 5, 5.5, 5.5};
   d.mv = {0.3333333333333333, 1e-310, 99.99999999999999, 7};
@@ -115,7 +115,15 @@ TEST_CASE("check_loop_data") {
   LoopData nan = sample_loop();
   nan.mv[2] = std::numeric_limits<double>::quiet_NaN();
   CHECK_THROWS_WITH_AS(valvediag::check_loop_data(nan),
-                       "sim: column 'mv': sample 3 is nan (NaN or infinite values cannot be used)",
+                       "sim: column 'mv': sample 3: nan is NaN or infinite (remove the row or fill "
+                       "it in)",
+                       DataError);
+  LoopData marker = sample_loop();
+  marker.pv[1] = 3.4e38;  // a historian's bad-value marker
+  CHECK_THROWS_WITH_AS(valvediag::check_loop_data(marker),
+                       "sim: column 'pv': sample 2: 3.4e+38 is no measurement (beyond +-1e12 in "
+                       "any unit: a historian's bad-value marker or a corrupt cell; remove the row "
+                       "or fill it in)",
                        DataError);
   LoopData back = sample_loop();
   back.t[2] = 0.1;
