@@ -11,6 +11,7 @@
 
 #include "commands.hpp"
 #include "fit_runner.hpp"
+#include "valvediag/atomic_file.hpp"
 #include "valvediag/bus_factory.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/diagnosis.hpp"
@@ -229,7 +230,7 @@ void add_demo(CLI::App& app, int& exit_code) {
     std::cout << run.summary << "\n";
     print_comparison(run);
     if (!json_path.empty()) {
-      write_text(json_path, run.json.dump(2) + "\n");
+      write_file_atomically(json_path, run.json.dump(2) + "\n");
       std::cout << "wrote " << json_path << "\n";
     }
     if (run.result.status != IdentificationStatus::Ok) {

@@ -5,6 +5,7 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "fit_runner.hpp"
+#include "valvediag/atomic_file.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
 #include "valvediag/loop_verdict.hpp"
@@ -116,7 +117,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       nlohmann::json j = diagnosis_json(r, d.t, vt);
       add_verdict_json(j, lv);
       j["analysed_from_s"] = part.from_s;
-      write_text(a->json, j.dump(2) + "\n");
+      write_file_atomically(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }
     if (!a->no_history) {

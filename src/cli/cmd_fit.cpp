@@ -8,6 +8,7 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "fit_runner.hpp"
+#include "valvediag/atomic_file.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/data_checks.hpp"
@@ -155,7 +156,7 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const st
     nlohmann::json j = model_fit_json(f, where, d.t);
     j["band_intervals"] = bands;
     if (lv) add_verdict_json(j, *lv);
-    write_text(a.json, j.dump(2) + "\n");
+    write_file_atomically(a.json, j.dump(2) + "\n");
     std::cout << "wrote " << a.json << "\n";
   }
   if (!a.series.empty() && f.status != ModelFitStatus::NoStableModel) {
@@ -347,7 +348,7 @@ void add_fit(CLI::App& app, int& exit_code) {
       add_verdict_json(run.json, *lv);
     }
     if (!a->json.empty()) {
-      write_text(a->json, run.json.dump(2) + "\n");
+      write_file_atomically(a->json, run.json.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }
     if (!a->series.empty() && run.result.status == IdentificationStatus::Ok) {

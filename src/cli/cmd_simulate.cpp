@@ -3,6 +3,7 @@
 
 #include "commands.hpp"
 #include "fit_runner.hpp"
+#include "valvediag/atomic_file.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/random_loop.hpp"
 #include "valvediag/scenarios.hpp"
@@ -72,7 +73,7 @@ void add_simulate(CLI::App& app, int& exit_code) {
       s = a->config.empty() ? scenario_by_name(a->scenario) : load_scenario_file(a->config);
     }
     if (!a->save_config.empty()) {
-      write_text(a->save_config, scenario_to_toml(s));
+      write_file_atomically(a->save_config, scenario_to_toml(s));
       std::cout << "wrote " << a->save_config << "\n";
     }
     const LoopData d = run_scenario(s, seed, a->samples);

@@ -3,7 +3,6 @@
 #include <fstream>
 #include <stdexcept>
 
-#include "valvediag/atomic_file.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/fit_report.hpp"
@@ -52,10 +51,6 @@ void write_series(const std::string& path, const LoopData& d, const FitRun& run)
   const std::string yname = run.result.model.block == LinearBlock::Identity ? "mv" : "pv";
   write_columns_csv(path, {"t", "op", yname, "x_hat", yname + "_sim", "residual"},
                     {d.t, d.op, y, s.x_hat, s.y_sim, s.residual});
-}
-
-void write_text(const std::string& path, const std::string& text) {
-  write_file_atomically(path, text);
 }
 
 }  // namespace valvediag::cli

@@ -21,6 +21,5 @@ struct FitRun {
 FitRun run_fit(const LoopData& d, const FitOptions& fo, const std::string& output,
                const OpRange& range = {});
 void write_series(const std::string& path, const LoopData& d, const FitRun& run);
-void write_text(const std::string& path, const std::string& text);
 
 }  // namespace valvediag::cli

@@ -4,7 +4,6 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <chrono>
 #include <filesystem>
 #include <random>
 #include <stdexcept>
@@ -28,10 +27,7 @@ std::string folder_of(const std::string& path) {
 AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
   if (path_.empty()) throw std::runtime_error("no file name to write");
   std::random_device rd;
-  std::mt19937_64 rng(
-      (static_cast<std::uint64_t>(rd()) << 32) ^
-      static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count()) ^
-      static_cast<std::uint64_t>(::getpid()));
+  std::mt19937_64 rng((static_cast<std::uint64_t>(rd()) << 32) ^ rd());
   // A fresh name each try: O_EXCL refuses anything already there, links included.
   for (int attempt = 0; attempt < 16; ++attempt) {
     char suffix[24];
@@ -40,8 +36,9 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
     tmp_ = path_ + suffix;
     fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
     if (fd_ >= 0) return;
-    if (errno != EEXIST)
-      throw std::runtime_error("cannot write " + path_ + ": " + reason(errno) + " (is its folder " +
+    const int err = errno;
+    if (err != EEXIST)
+      throw std::runtime_error("cannot write " + path_ + ": " + reason(err) + " (is its folder " +
                                folder_of(path_) + " there and writable?)");
   }
   throw std::runtime_error("cannot write " + path_ +
@@ -73,9 +70,11 @@ void AtomicFile::commit() {
   fd_ = -1;
   if (::close(fd) != 0)
     throw std::runtime_error("writing " + path_ + " failed: " + reason(errno) + " (disk full?)");
-  if (::rename(tmp_.c_str(), path_.c_str()) != 0)
-    throw std::runtime_error("cannot replace " + path_ + ": " + reason(errno) +
-                             (errno == EISDIR ? " (it is a folder)" : ""));
+  if (::rename(tmp_.c_str(), path_.c_str()) != 0) {
+    const int err = errno;
+    throw std::runtime_error("cannot replace " + path_ + ": " + reason(err) +
+                             (err == EISDIR ? " (it is a folder)" : ""));
+  }
   committed_ = true;
   // The rename itself on disk: the folder's entry.
   const int dir = ::open(folder_of(path_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
