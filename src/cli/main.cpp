@@ -1,13 +1,52 @@
 // valvediag: identify sticky control valves from controller output and process variable data.
 // The only place that prints or exits; the libraries throw and return.
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "commands.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/model_spec.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/site_config.hpp"
+
+namespace {
+
+// Edits (insert, delete, substitute) between two words: a typed command's nearest name.
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// CLI11 says "A subcommand is required" for a mistyped one: name it and the nearest command.
+std::string unknown_command_message(const CLI::App& app, const std::string& word) {
+  std::string nearest;
+  std::size_t best = word.size() / 2 + 2;  // farther than that is not a typo of it
+  for (const auto* sub : app.get_subcommands({})) {
+    const std::size_t d = edit_distance(word, sub->get_name());
+    if (d < best) {
+      best = d;
+      nearest = sub->get_name();
+    }
+  }
+  return "unknown command '" + word + "'" +
+         (nearest.empty() ? ";" : "; did you mean '" + nearest + "'?") +
+         " 'valvediag help' lists the commands";
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace valvediag::cli;
@@ -42,13 +81,20 @@ int main(int argc, char** argv) {
     }
     for (auto* sub : app.get_subcommands({}))
       if (sub->get_name() == topic) {
+        // As `valvediag CMD --help` prints it, examples included.
         std::cout << sub->get_formatter()->make_help(sub, "valvediag " + topic,
-                                                     CLI::AppFormatMode::Sub);
+                                                     CLI::AppFormatMode::Normal);
         return;
       }
-    throw UsageError("unknown command '" + topic + "'; 'valvediag help' lists them");
+    throw UsageError(unknown_command_message(app, topic));
   });
   try {
+    if (argc > 1 && argv[1][0] != '-') {
+      const auto subs = app.get_subcommands({});
+      if (std::none_of(subs.begin(), subs.end(),
+                       [&](const CLI::App* s) { return s->check_name(argv[1]); }))
+        throw UsageError(unknown_command_message(app, argv[1]));
+    }
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);

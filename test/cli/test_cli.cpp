@@ -76,6 +76,18 @@ TEST_CASE("help lists the commands and each command explains itself") {
   CHECK(run("help nonsense").status == 2);
   CHECK(run("").status == 2);
   CHECK(run("fit x.csv --no-such-option").status == 2);
+  // `help CMD` is `CMD --help`, examples included.
+  const auto options = [](const std::string& help) { return help.substr(help.find("\n\n")); };
+  CHECK(options(run("help fit").out) == options(f.out));  // the usage line names the program
+  // A mistyped command names itself and the nearest one; a word like no command names none.
+  auto typo = run("fitt x.csv");
+  CHECK(typo.status == 2);
+  CHECK(typo.out.find("unknown command 'fitt'; did you mean 'fit'?") != std::string::npos);
+  CHECK(run("help diagnoze").out.find("did you mean 'diagnose'?") != std::string::npos);
+  auto far = run("zzzzzzzz");
+  CHECK(far.status == 2);
+  CHECK(far.out.find("unknown command 'zzzzzzzz';") != std::string::npos);
+  CHECK(far.out.find("did you mean") == std::string::npos);
 }
 
 TEST_CASE("bad input data: clear message and exit status 2") {
