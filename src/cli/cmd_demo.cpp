@@ -204,7 +204,8 @@ void add_demo(CLI::App& app, int& exit_code) {
       std::atomic<bool> stop{false};
       const RecorderStatus st = rec.run(stop);
       plc.stop();
-      std::cout << " done in " << st.elapsed_s << " s\n" << recorder_summary(st, db, rec.run_id());
+      std::printf(" done in %.1f s\n", st.elapsed_s);
+      std::cout << recorder_summary(st, db, rec.run_id());
       if (plc.write_requests() != 0)
         throw std::runtime_error("the demo sent a write request: this is a bug");
       // Ticks the recorder missed (a loaded machine) are gaps: short ones are bridged, then the

@@ -92,16 +92,18 @@ Identifiability analyse_identifiability(const PreisachGrid& grid, const std::vec
   } else if (maxima.size() >= 2 && minima.size() >= 2 && concentrated(maxima) &&
              concentrated(minima)) {
     r.kind = ExcitationKind::TwoExtremes;
-    s << "the input oscillates between two extremes (Proposition 3): only about 2L-1 = "
-      << 2 * grid.L - 1 << " combinations of the " << r.relays << " weights are identifiable ("
+    // The paper's Proposition 3; user text names no paper numbers (docs/method.md has them).
+    s << "the input oscillates between two extremes: only about 2L-1 = " << 2 * grid.L - 1
+      << " combinations of the " << r.relays << " weights are identifiable ("
       << r.identifiable_combinations
       << " on this data); read the weights as the loop's ascending and descending paths, not one "
          "by one";
   } else {
     r.kind = ExcitationKind::General;
-    s << "general input with " << r.reversals << " reversals; its extrema cover "
+    // Lemma 1: every weight is identifiable when the extrema cover all thresholds.
+    s << "the input reverses " << r.reversals << " times; its extrema cover "
       << static_cast<int>(100 * r.threshold_coverage + 0.5)
-      << " % of the thresholds (Lemma 1 wants all); " << r.identifiable_combinations << " of "
+      << " % of the thresholds (every weight needs all); " << r.identifiable_combinations << " of "
       << r.relays << " weight combinations are identifiable";
   }
   r.summary = s.str();

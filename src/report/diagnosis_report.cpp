@@ -281,27 +281,41 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
 }
 
 std::string format_ladder(const std::vector<HistoryEntry>& entries) {
+  // One row per distinct model, its latest fit, in the order of those fits: a climb run twice
+  // (or a refit of the start model) would otherwise repeat rows and their changes.
+  std::vector<std::size_t> rows;
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    bool later = false;
+    for (std::size_t k = i + 1; k < entries.size() && !later; ++k)
+      later = entries[k].model == entries[i].model;
+    if (!later) rows.push_back(i);
+  }
+  const auto pct = [](double v) { return std::isfinite(v) ? num(v) + " %" : std::string("-"); };
+  const auto change = [](double now, double before) {
+    return std::isfinite(now) && std::isfinite(before) ? signed_num(now - before)
+                                                       : std::string("-");
+  };
   std::ostringstream o;
   char line[512];
-  std::snprintf(line, sizeof line, "%-4s  %-28s  %10s  %10s  %8s  %s\n", "step", "model",
-                "estimation", "validation", "change", "parameters that matter");
+  std::snprintf(line, sizeof line, "%-4s  %-28s  %10s  %8s  %10s  %8s  %s\n", "step", "model",
+                "estimation", "change", "validation", "change", "parameters that matter");
   o << line;
-  for (std::size_t i = 0; i < entries.size(); ++i) {
-    const auto& e = entries[i];
-    std::string change;
-    if (i > 0) {
-      const auto& p = entries[i - 1];
-      const bool val = std::isfinite(e.validation_fitness_percent) &&
-                       std::isfinite(p.validation_fitness_percent);
-      change = val ? signed_num(e.validation_fitness_percent - p.validation_fitness_percent)
-                   : signed_num(e.fitness_percent - p.fitness_percent);
-    }
-    std::snprintf(line, sizeof line, "%-4zu  %-28s  %9s%%  %9s%%  %8s  %s\n", i + 1,
-                  e.model.c_str(), num(e.fitness_percent).c_str(),
-                  num(e.validation_fitness_percent).c_str(), change.c_str(),
-                  report_format::parameters(e.parameters).c_str());
+  for (std::size_t r = 0; r < rows.size(); ++r) {
+    const auto& e = entries[rows[r]];
+    const HistoryEntry* p = r > 0 ? &entries[rows[r - 1]] : nullptr;
+    std::snprintf(
+        line, sizeof line, "%-4zu  %-28s  %10s  %8s  %10s  %8s  %s\n", r + 1, e.model.c_str(),
+        pct(e.fitness_percent).c_str(),
+        p ? change(e.fitness_percent, p->fitness_percent).c_str() : "",
+        pct(e.validation_fitness_percent).c_str(),
+        p ? change(e.validation_fitness_percent, p->validation_fitness_percent).c_str() : "",
+        report_format::parameters(e.parameters).c_str());
     o << line;
   }
+  if (rows.size() < entries.size())
+    o << "(" << entries.size() - rows.size() << " earlier fit"
+      << (entries.size() - rows.size() == 1 ? " of a model above is" : "s of models above are")
+      << " left out; the history file keeps every fit)\n";
   return o.str();
 }
 
@@ -317,7 +331,7 @@ std::string format_model_fit(const ModelFit& f, const ResidualAnalysis& where,
   o << "fitness:   " << num(f.fitness_percent) << " % on estimation data";
   if (std::isfinite(f.validation_fitness_percent))
     o << ", " << num(f.validation_fitness_percent) << " % on validation data";
-  o << " (simulated output, eq 20)\n";
+  o << " (simulated output: the model driven by OP alone)\n";
   if (f.status == ModelFitStatus::NoStableModel)
     o << "where it fails: nowhere to say (no stable model, so no simulated PV)\n";
   else

@@ -278,7 +278,7 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
   }
   o << "           c = " << num(m.c) << "\n";
   o << "fitness:   " << num(r.fitness_percent, 2)
-    << " % on estimation data (simulated output, eq 20)";
+    << " % on estimation data (simulated output: the model driven by OP alone)";
   if (std::isfinite(r.validation_fitness_percent))
     o << ", " << num(r.validation_fitness_percent, 2) << " % on validation data";
   o << "\n";
@@ -295,8 +295,7 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
       << " of " << m.grid.L << " before the record (+" << num(r.initial_memory_gain_percent, 2)
       << " fitness points)\n";
   }
-  o << "identifiability: " << to_string(r.identifiability.kind) << ": " << r.identifiability.summary
-    << "\n";
+  o << "identifiability: " << r.identifiability.summary << "\n";
   if (ctx.residual) o << format_where(*ctx.residual, ctx);
   int unstable = 0;
   for (const auto& c : r.configurations) unstable += !c.stable;

@@ -418,7 +418,7 @@ PlotJob fit_plot(const ReportContent& c, std::size_t buckets) {
           << "plot " << pv << " with lines lw 1.2 lc rgb '#555555' title 'measured PV', " << sim
           << " with lines lw 1.2 lc rgb '#d62728' title 'simulated PV (model)'" << shade_keys(c)
           << "\n";
-  std::string cap = "The model is driven by OP alone (simulated output, eq 20).";
+  std::string cap = "The model is driven by OP alone (simulated output).";
   if (c.where != nullptr)
     cap += " Shaded red: the " + std::to_string(c.where->intervals.size()) +
            " interval(s) where the residual stands out beyond its white-noise level.";
@@ -731,7 +731,7 @@ void header_section(std::ostringstream& o, const ReportContent& c) {
                            0)) +
                      " %, held out)"
                : std::string("no validation split")) +
-          " (simulated output, eq 20)");
+          " (simulated output)");
   row(o, "verdict",
       c.verdict.empty()
           ? std::string(c.diagnosis != nullptr ? "not judged" : "not diagnosed")

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "page_checks.hpp"
+#include "valvediag/diagnosis_report.hpp"
 #include "valvediag/gnuplot.hpp"
 #include "valvediag/html_report.hpp"
 #include "valvediag/scenarios.hpp"
@@ -358,4 +359,33 @@ TEST_CASE("the page of a record without a model: why, the loop-health figures, O
   CHECK_THROWS_AS(html_data_page(c), std::invalid_argument);
   c.data = nullptr;
   CHECK_THROWS_AS(html_data_page(c), std::invalid_argument);
+}
+
+TEST_CASE("the ladder table: one row per model, estimation and validation changes apart") {
+  auto entry = [](const char* model, double est, double val) {
+    HistoryEntry e;
+    e.model = model;
+    e.fitness_percent = est;
+    e.validation_fitness_percent = val;
+    return e;
+  };
+  // A climb run twice, then a fit without a held-out part.
+  const std::vector<HistoryEntry> h = {entry("linear", 80.0, 60.0), entry("stiction", 90.0, 85.5),
+                                       entry("linear", 81.0, 61.0), entry("stiction", 91.0, 86.0),
+                                       entry("stiction+disturbance", 93.5, NAN)};
+  const std::string t = format_ladder(h);
+  INFO(t);
+  std::vector<std::string> lines;
+  for (std::size_t a = 0, b; (b = t.find('\n', a)) != std::string::npos; a = b + 1)
+    lines.push_back(t.substr(a, b - a));
+  REQUIRE(lines.size() == 5);  // header, three models, the note on the two left out
+  CHECK(lines[0].find("estimation    change  validation    change") != std::string::npos);
+  CHECK(lines[1].find("linear") != std::string::npos);
+  CHECK(lines[1].find("81.00 %") != std::string::npos);  // its latest fit
+  // The changes against the row above, each part in its own column.
+  CHECK(lines[2].find("91.00 %    +10.00     86.00 %    +25.00") != std::string::npos);
+  // No held-out part: a dash, never "n/a%" or a change against nothing.
+  CHECK(lines[3].find("93.50 %     +2.50           -         -") != std::string::npos);
+  CHECK(t.find("n/a") == std::string::npos);
+  CHECK(lines[4].find("2 earlier fits") != std::string::npos);
 }
