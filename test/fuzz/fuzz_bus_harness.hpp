@@ -27,13 +27,12 @@ inline std::string run_site_config(std::string_view text) {
     return "";
   }
   if (s.loops.empty()) return "accepted a site without loops";
-  auto same_but_case = [](std::string_view a, std::string_view b) {
-    if (a.size() != b.size() || a == b) return false;
-    for (std::size_t i = 0; i < a.size(); ++i)
-      if (std::tolower(static_cast<unsigned char>(a[i])) !=
-          std::tolower(static_cast<unsigned char>(b[i])))
-        return false;
-    return true;
+  // Written apart from the loader's check, so that one checks the other.
+  auto same_but_case = [](std::string a, std::string b) {
+    if (a == b) return false;
+    for (std::string* x : {&a, &b})
+      for (char& c : *x) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return a == b;
   };
   for (std::size_t i = 0; i < s.buses.size(); ++i) {
     const BusConfig& b = s.buses[i];
