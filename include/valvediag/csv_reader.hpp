@@ -24,9 +24,9 @@
 
 namespace valvediag {
 
-// 10 million rows: 115 days at 1 s, more than one analysis needs; reading them holds about
-// 50 bytes a row (t, op, pv, sp, mv and the row's line number), some 0.5 to 1 GB with the
-// vectors' growth, which a laptop has.
+// 10 million rows: 115 days at 1 s, more than one analysis needs. Reading holds 32 to 48 bytes
+// a row (t, op, pv, optional sp and mv, the row's line number): `fit` peaked at 340 MB refusing
+// a file of t, op, pv just beyond the cap, well within a laptop.
 inline constexpr std::size_t kDefaultMaxRows = 10'000'000;
 
 struct CsvOptions {
