@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <limits>
 #include <utility>
 
 #include "commands.hpp"
@@ -66,7 +65,8 @@ void add_layout_options(CLI::App* cmd, DataOptions& d) {
   cmd->add_option("--max-rows", d.csv.max_rows,
                   "refuse a CSV file with more data rows than this (it bounds memory, about 50 "
                   "bytes a row)")
-      ->check(CLI::Range(std::size_t{2}, std::numeric_limits<std::size_t>::max()))
+      // An upper end, so that "-3" (read as a huge unsigned number) is refused.
+      ->check(CLI::Range(std::size_t{2}, std::size_t{1'000'000'000'000}))
       ->group(g)
       ->capture_default_str();
   cmd->add_option(

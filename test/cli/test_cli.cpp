@@ -143,6 +143,11 @@ TEST_CASE("bad input data: clear message and exit status 2") {
     CHECK(r.out.find("rows.csv:502: more than 500 data rows, the --max-rows limit") !=
           std::string::npos);
     CHECK(run("fit " + tmp("rows.csv") + " --max-rows 1").status == 2);
+    // Not wrapped round to a huge unsigned cap.
+    auto neg = run("fit " + tmp("rows.csv") + " --max-rows -3");
+    CHECK(neg.status == 2);
+    CHECK(neg.out.find("--max-rows: Value -3 not in range 2 to 1000000000000") !=
+          std::string::npos);
     // The whole-file read grew to gigabytes here: with a time limit, so it cannot hang the test.
     const std::string cmd = std::string("timeout 60 ") + VALVEDIAG_BIN + " fit /dev/zero 2>&1";
     FILE* p = popen(cmd.c_str(), "r");
