@@ -24,7 +24,7 @@ int main(int argc, char** argv) {
 
   std::string toml =
       "[[bus]]\nname = \"plc\"\nprotocol = \"modbus-tcp\"\ncontroller = "
-      "\"tcp://127.0.0.1:0\"\ntimeout = \"200ms\"\nretries = 0\n";
+      "\"tcp://127.0.0.1\"\ntimeout = \"200ms\"\nretries = 0\n";
   for (int i = 0; i < loops; ++i) {
     const int a = 8 * i;
     char b[512];

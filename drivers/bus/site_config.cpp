@@ -133,6 +133,14 @@ std::string seconds_text(double s) {
   return b;
 }
 
+// A key as it appears in messages: control characters (a NUL in a quoted key) made visible.
+std::string visible(std::string_view s) {
+  std::string out(s);
+  for (char& c : out)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  return out;
+}
+
 class Table {
  public:
   Table(const std::string& file, const toml::table& t, std::string name)
@@ -162,7 +170,7 @@ class Table {
       std::string list;
       for (auto a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
       throw SiteConfigError(file_, static_cast<int>(key.source().begin.line),
-                            static_cast<int>(key.source().begin.column), path(key.str()),
+                            static_cast<int>(key.source().begin.column), path(visible(key.str())),
                             "unknown key; remove it or use one of: " + list);
     }
   }
@@ -176,7 +184,10 @@ class Table {
       return def;
     }
     if (!n->is_string()) fail(key, std::string("must be a string, got ") + kind_of(*n));
-    return n->as_string()->get();
+    const std::string& v = n->as_string()->get();
+    // A NUL would cut the name or path short wherever it reaches C (file names, SQLite, logs).
+    if (v.find('\0') != std::string::npos) fail(key, "holds a NUL character (\\u0000); remove it");
+    return v;
   }
   double number(std::string_view key, double def) const {
     const toml::node* n = t_.get(key);
@@ -212,8 +223,12 @@ class Table {
     return n->as_boolean()->get();
   }
   // A duration: "500ms", "2s", "10m" or a number of seconds, within [lo, hi] seconds.
-  double duration(std::string_view key, double def, double lo, double hi) const {
+  double duration(std::string_view key, double def, double lo, double hi,
+                  const char* required_example = nullptr) const {
     const toml::node* n = t_.get(key);
+    if (!n && required_example)
+      fail_table("missing key '" + std::string(key) + "'; add " + std::string(key) + " = " +
+                 required_example);
     if (!n) return def;
     std::optional<double> v;
     if (n->is_string())
@@ -252,6 +267,16 @@ class Table {
 std::string resolve(const std::string& base_dir, const std::string& p) {
   if (p.empty() || base_dir.empty() || std::filesystem::path(p).is_absolute()) return p;
   return (std::filesystem::path(base_dir) / p).lexically_normal().string();
+}
+
+// Equal but for ASCII case (names are ASCII: valid_name).
+bool same_but_case(std::string_view a, std::string_view b) {
+  if (a.size() != b.size() || a == b) return false;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    if (std::tolower(static_cast<unsigned char>(a[i])) !=
+        std::tolower(static_cast<unsigned char>(b[i])))
+      return false;
+  return true;
 }
 
 bool valid_name(const std::string& s) {
@@ -311,7 +336,12 @@ BusConfig read_bus(const Table& t, const std::string& base_dir) {
           if (pos != port.size()) p = -1;
         } catch (const std::exception&) {
         }
-        if (p < 0 || p > 65535) t.fail("controller", "port '" + port + "' is not 0..65535");
+        // Port 0 is no server's port: a connect to it can only fail, on every poll.
+        if (p < 1 || p > 65535)
+          t.fail("controller",
+                 "port '" + port +
+                     "' is not 1..65535 (Modbus TCP is usually 502; for a free port of "
+                     "the simulated PLC use sim-plc --port 0)");
         b.port = p;
       }
     } else {
@@ -375,6 +405,18 @@ PointConfig read_modbus_point(const Table& t) {
   const auto bo = parse_byte_order(order);
   if (!bo) t.fail("byte_order", "'" + order + "' must be ABCD, CDAB, BADC or DCBA (or AB, BA)");
   p.order = *bo;
+  // The order's length must fit the type: a 32-bit order on one register (or the reverse)
+  // usually means the type is wrong, and one register of a 32-bit value is a wrong number.
+  if (t.has("byte_order")) {
+    const bool one_register = register_count(p.type) == 1;
+    if (one_register && order.size() != 2)
+      t.fail("byte_order", "'" + order + "' orders the 4 bytes of a 32-bit value, but " + type +
+                               " is one register: write \"AB\" or \"BA\", or give the 32-bit "
+                               "type the registers hold");
+    if (!one_register && order.size() != 4)
+      t.fail("byte_order", "'" + order + "' orders the 2 bytes of one register, but " + type +
+                               " spans two: write ABCD, CDAB, BADC or DCBA");
+  }
   p.scale = t.number("scale", 1.0);
   if (p.scale == 0.0) t.fail("scale", "must not be 0");
   p.offset = t.number("offset", 0.0);
@@ -439,7 +481,10 @@ LoopConfigEntry read_loop(const Table& t, const SiteConfig& site,
     t.fail("bus", "no bus named '" + l.bus + "'; define it in a [[bus]] table (known: " +
                       (names.empty() ? "none" : names) + ")");
   }
-  l.sample_period_s = t.duration("sample_period", 1.0, 0.001, 3600.0);
+  // Required: the polling period sets every time stamp of the recording, so a forgotten line
+  // must not quietly become 1 s. All shipped configs give it.
+  l.sample_period_s = t.duration("sample_period", 1.0, 0.001, 3600.0,
+                                 "\"1s\" (how often the recorder polls this loop)");
   if (const toml::node* r = t.get("op_range")) {
     const toml::array* a = r->as_array();
     if (!a || a->size() != 2 || !a->get(0)->is_number() || !a->get(1)->is_number())
@@ -555,7 +600,7 @@ SiteConfig parse_site_config(std::string_view text, const std::string& source_na
     if (k != "bus" && k != "loop" && k != "fault")
       throw SiteConfigError(
           source_name, static_cast<int>(key.source().begin.line),
-          static_cast<int>(key.source().begin.column), std::string(k),
+          static_cast<int>(key.source().begin.column), visible(k),
           "unknown key; a site file holds [[bus]], [[loop]] and [[fault]] tables");
   }
   std::vector<std::optional<Dbc>> dbcs;
@@ -563,6 +608,11 @@ SiteConfig parse_site_config(std::string_view text, const std::string& source_na
     BusConfig b = read_bus(t, base_dir);
     if (site.find_bus(b.name))
       t.fail("name", "bus '" + b.name + "' is defined twice; give each bus its own name");
+    for (const auto& o : site.buses)
+      if (same_but_case(o.name, b.name))
+        t.fail("name", "bus '" + b.name + "' differs from bus '" + o.name + "' (line " +
+                           std::to_string(o.line) +
+                           ") only in upper and lower case; give the buses distinct names");
     std::optional<Dbc> dbc;
     if (!b.dbc.empty()) {
       try {
@@ -578,6 +628,13 @@ SiteConfig parse_site_config(std::string_view text, const std::string& source_na
     LoopConfigEntry l = read_loop(t, site, dbcs, base_dir);
     if (site.find_loop(l.name))
       t.fail("name", "loop '" + l.name + "' is defined twice; loop names must be unique");
+    // FIC101 and fic101 would share a file name on a case-insensitive disk and be mistaken
+    // for each other by anyone reading the results.
+    for (const auto& o : site.loops)
+      if (same_but_case(o.name, l.name))
+        t.fail("name", "loop '" + l.name + "' differs from loop '" + o.name + "' (line " +
+                           std::to_string(o.line) +
+                           ") only in upper and lower case; give the loops distinct names");
     site.loops.push_back(std::move(l));
   });
   each_table(source_name, root, "fault",

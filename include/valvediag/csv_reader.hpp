@@ -5,6 +5,9 @@
 // lines among the data are ignored. Cells may be quoted ("a,b", "" for a quote). Line ends may be
 // LF, CRLF or CR; a UTF-8 byte-order mark is skipped.
 //
+// The file is read line by line: memory follows the rows kept (CsvOptions::max_rows caps them),
+// and a line longer than 1 MiB (binary data, /dev/zero) is refused at its line number.
+//
 // Every problem throws DataError naming the file, line and column: unreadable file, missing
 // column, empty / non-numeric / NaN / infinite cell, a row with too few cells or with more cells
 // than the header has names, time not increasing, irregular sampling (without resample), fewer
@@ -20,6 +23,11 @@
 #include "valvediag/loop_data.hpp"
 
 namespace valvediag {
+
+// 10 million rows: 115 days at 1 s, more than one analysis needs. Reading holds 32 to 48 bytes
+// a row (t, op, pv, optional sp and mv, the row's line number): `fit` peaked at 340 MB refusing
+// a file of t, op, pv just beyond the cap, well within a laptop.
+inline constexpr std::size_t kDefaultMaxRows = 10'000'000;
 
 struct CsvOptions {
   // ",", ";", "tab", "space" (runs of blanks), "|", any other single punctuation character, or
@@ -47,6 +55,9 @@ struct CsvOptions {
   bool resample = false;
   std::optional<double> sample_period;  // s; without resample it must match the data's period
   char decimal = '.';                   // '.' or ',' (then '.' in a number is an error)
+  // More data rows than this are refused (DataError at the first row beyond), so that a huge
+  // or endless input cannot exhaust memory; at least 2.
+  std::size_t max_rows = kDefaultMaxRows;
 };
 
 // Relative deviation of a time step from the median step above which sampling is irregular.

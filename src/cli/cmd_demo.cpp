@@ -29,10 +29,11 @@ namespace valvediag::cli {
 namespace {
 
 // The embedded site: one loop, the paper's Example 1, as FLOAT32 holding registers 0..7.
+// No port: it is the simulated PLC's free one, set once the PLC listens.
 SiteConfig demo_site(std::uint64_t seed, double period_s) {
   const std::string toml =
       "[[bus]]\nname = \"demo-plc\"\nprotocol = \"modbus-tcp\"\n"
-      "controller = \"tcp://127.0.0.1:0\"\ntimeout = \"200ms\"\nretries = 1\n"
+      "controller = \"tcp://127.0.0.1\"\ntimeout = \"200ms\"\nretries = 1\n"
       "reconnect_max = \"200ms\"\n"
       "[[loop]]\nname = \"FIC101\"\nbus = \"demo-plc\"\nsimulate = \"paper-ex1\"\nseed = " +
       std::to_string(seed) +

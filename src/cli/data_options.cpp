@@ -62,6 +62,13 @@ void add_layout_options(CLI::App* cmd, DataOptions& d) {
       ->capture_default_str();
   cmd->add_flag("--resample", d.csv.resample, "interpolate irregular sampling onto a uniform grid")
       ->group(g);
+  cmd->add_option("--max-rows", d.csv.max_rows,
+                  "refuse a CSV file with more data rows than this (it bounds memory, about 50 "
+                  "bytes a row)")
+      // An upper end, so that "-3" (read as a huge unsigned number) is refused.
+      ->check(CLI::Range(std::size_t{2}, std::size_t{1'000'000'000'000}))
+      ->group(g)
+      ->capture_default_str();
   cmd->add_option(
          "--sample-period", d.sample_period,
          "sample period in s (with --resample, without a time column, or for a .mat matrix or "
@@ -143,10 +150,11 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
     const CsvOptions plain;
     const CsvOptions& c = d.csv;
     if (c.delimiter != plain.delimiter || c.skip_lines || c.skip_after_header ||
-        c.time_format != plain.time_format || c.resample || d.decimal != ".")
+        c.time_format != plain.time_format || c.resample || d.decimal != "." ||
+        c.max_rows != plain.max_rows)
       throw UsageError(d.data +
                        ": --delimiter, --skip-lines, --skip-after-header, --time-format, "
-                       "--resample and --decimal are for CSV files, not .mat");
+                       "--resample, --decimal and --max-rows are for CSV files, not .mat");
     MatOptions m;
     m.op = c.op_column;
     m.pv = c.pv_column;

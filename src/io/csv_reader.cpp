@@ -9,6 +9,7 @@
 #include <deque>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <system_error>
 
 #include "time_parse.hpp"
@@ -22,6 +23,8 @@ namespace {
 constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
 // Resampling makes at most this many samples (and at most 100 per row beyond 10^6).
 constexpr double kMaxGridPoints = 2e7;
+// Longer lines are not data rows: a row of even a few hundred columns is some kilobytes.
+constexpr std::size_t kMaxLineBytes = std::size_t{1} << 20;
 
 bool is_blank(char c) {
   return c == ' ' || c == '\t';
@@ -43,18 +46,53 @@ std::string show(std::string_view s) {
   return out + "'";
 }
 
-// Physical lines; the line end is LF (optionally after CR), or CR alone in files without LF.
+// Physical lines of text in memory, or of a file read in chunks so that memory stays bounded
+// whatever the file's size. The line end is LF (optionally after CR), or CR alone when the
+// first window (the text, or the first kMaxLineBytes of a file) has no LF. A line longer than
+// kMaxLineBytes is refused at its line number: no line end within it means binary data or a
+// device like /dev/zero, and reading on would only fill memory.
 class Lines {
  public:
-  explicit Lines(std::string_view text)
-      : text_(text), eol_(text.find('\n') != std::string_view::npos ? '\n' : '\r') {}
+  Lines(std::string_view text, const std::string& file) : file_(file), data_(text) {
+    eol_ = text.find('\n') != std::string_view::npos || text.find('\r') == std::string_view::npos
+               ? '\n'
+               : '\r';
+  }
+  Lines(std::FILE* f, const std::string& file) : file_(file), f_(f), eof_(false) {
+    while (!eof_ && buf_.size() <= kMaxLineBytes) {
+      const std::size_t old = buf_.size();
+      fill();
+      if (std::memchr(buf_.data() + old, '\n', buf_.size() - old) != nullptr) break;
+    }
+    eol_ =
+        buf_.find('\n') != std::string::npos || buf_.find('\r') == std::string::npos ? '\n' : '\r';
+  }
+
+  // The bytes at the start of the text (all of it in memory, at least the first line of a file),
+  // for the byte-order-mark checks before the first next().
+  std::string_view start() const { return data_.substr(pos_); }
+  void skip(std::size_t n) { pos_ += n; }
 
   bool next(std::string_view& line) {
-    if (pos_ >= text_.size()) return false;
-    const char* begin = text_.data() + pos_;
-    const std::size_t rest = text_.size() - pos_;
-    const void* hit = std::memchr(begin, eol_, rest);
+    const void* hit = nullptr;
+    for (std::size_t scanned = 0;;) {
+      hit = std::memchr(data_.data() + pos_ + scanned, eol_, data_.size() - pos_ - scanned);
+      const std::size_t rest = data_.size() - pos_;
+      if (hit != nullptr || rest > kMaxLineBytes || eof_) break;
+      scanned = rest;
+      buf_.erase(0, pos_);  // keep only the line being read
+      pos_ = 0;
+      fill();
+    }
+    if (pos_ >= data_.size()) return false;
+    const char* begin = data_.data() + pos_;
+    const std::size_t rest = data_.size() - pos_;
     std::size_t len = hit ? static_cast<std::size_t>(static_cast<const char*>(hit) - begin) : rest;
+    if (len > kMaxLineBytes)
+      throw DataError(file_, number_ + 1, "",
+                      "the line is longer than " + std::to_string(kMaxLineBytes >> 20) +
+                          " MiB (no line end within it): this is not a text data file (binary "
+                          "data, or a device such as /dev/zero?); give a CSV file");
     pos_ += len + (hit ? 1 : 0);
     if (eol_ == '\n' && len > 0 && begin[len - 1] == '\r') --len;
     line = std::string_view(begin, len);
@@ -64,8 +102,27 @@ class Lines {
   std::size_t number() const { return number_; }
 
  private:
-  std::string_view text_;
-  char eol_;
+  // Appends the next chunk of the file to buf_.
+  void fill() {
+    constexpr std::size_t kChunk = 1 << 16;
+    const std::size_t old = buf_.size();
+    buf_.resize(old + kChunk);
+    const std::size_t k = std::fread(buf_.data() + old, 1, kChunk, f_);
+    buf_.resize(old + k);
+    data_ = buf_;
+    if (k == kChunk) return;
+    if (std::ferror(f_))
+      throw DataError(file_, 0, "",
+                      "reading the file failed: " + std::generic_category().message(errno));
+    eof_ = true;
+  }
+
+  const std::string& file_;
+  std::FILE* f_ = nullptr;
+  std::string buf_;        // file mode: the unread part of the file read so far
+  std::string_view data_;  // the text, or buf_
+  bool eof_ = true;
+  char eol_ = '\n';
   std::size_t pos_ = 0;
   std::size_t number_ = 0;
 };
@@ -380,10 +437,8 @@ std::string number_problem(Num r, std::string_view cell, char decimal) {
   return p + ")";
 }
 
-}  // namespace
-
-LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std::string& file,
-                        std::vector<std::string>* notes) {
+LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& file,
+                     std::vector<std::string>* notes) {
   const char decimal = opt.decimal;
   if (decimal != '.' && decimal != ',')
     throw DataError(file, 0, "", "the decimal separator must be '.' or ','");
@@ -404,13 +459,15 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
   if (no_time && !opt.sample_period)
     throw DataError(file, 0, "", "without a time column (--t none) --sample-period is needed");
 
-  if (text.empty()) throw DataError(file, 0, "", "the file is empty (0 bytes)");
+  if (opt.max_rows < 2)
+    throw DataError(file, 0, "", "--max-rows must be at least 2 (a fit needs 2 samples)");
+  const std::string_view start = lines.start();
+  if (start.empty()) throw DataError(file, 0, "", "the file is empty (0 bytes)");
   // UTF-8 byte-order mark: skipped. UTF-16 would read as garbage, so it is refused early.
-  if (text.size() >= 3 && text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);
-  if (text.size() >= 2 && (text.substr(0, 2) == "\xFF\xFE" || text.substr(0, 2) == "\xFE\xFF"))
+  if (start.substr(0, 3) == "\xEF\xBB\xBF") lines.skip(3);
+  if (start.substr(0, 2) == "\xFF\xFE" || start.substr(0, 2) == "\xFE\xFF")
     throw DataError(file, 0, "", "the file is UTF-16 text; export or save it as UTF-8 (or ANSI)");
 
-  Lines lines(text);
   std::string_view line;
   for (std::size_t i = 0; i < opt.skip_lines; ++i) {
     if (!lines.next(line))
@@ -439,8 +496,10 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
   if (delim.detect) delim = detect_delimiter(line, decimal);
   Splitter splitter(delim);
 
+  // The names are views into the header row: kept, while a file's lines come and go.
+  const std::string header(line);
   std::vector<std::string_view> names;
-  switch (splitter.split(line, kNone, names)) {
+  switch (splitter.split(header, kNone, names)) {
     case Split::unterminated_quote:
       throw DataError(file, header_line, "", "a quoted column name has no closing quote");
     case Split::text_after_quote:
@@ -518,6 +577,12 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
 
   while (lines.next(line)) {
     if (blank_or_comment(line)) continue;
+    if (row_line.size() >= opt.max_rows)
+      throw DataError(file, lines.number(), "",
+                      "more than " + std::to_string(opt.max_rows) +
+                          " data rows, the --max-rows limit that keeps memory bounded (about 50 "
+                          "bytes a row); give --max-rows with a larger number to read it all, "
+                          "or cut the file into shorter records");
     const Split s = splitter.split(line, kNone, cells);
     if (s != Split::ok)
       throw DataError(file, lines.number(), "",
@@ -722,6 +787,14 @@ LoopData parse_loop_csv(std::string_view text, const CsvOptions& opt, const std:
   return d;
 }
 
+}  // namespace
+
+LoopData parse_loop_csv(std::string_view text, const CsvOptions& options,
+                        const std::string& name_for_messages, std::vector<std::string>* notes) {
+  Lines lines(text, name_for_messages);
+  return parse_lines(lines, options, name_for_messages, notes);
+}
+
 LoopData read_loop_csv(const std::string& path, const CsvOptions& options,
                        std::vector<std::string>* notes) {
   std::error_code ec;
@@ -732,18 +805,10 @@ LoopData read_loop_csv(const std::string& path, const CsvOptions& options,
     throw DataError(
         path, 0, "",
         "cannot open the file: " + std::generic_category().message(errno) + " (check the path)");
-  std::string text;
-  const auto size = std::filesystem::file_size(path, ec);
-  if (!ec) text.reserve(size);  // a hint only: pipes and growing files are read to the end
-  char buf[1 << 16];
-  std::size_t k;
-  while ((k = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, k);
-  const bool failed = std::ferror(f) != 0;
-  std::fclose(f);
-  if (failed)
-    throw DataError(path, 0, "",
-                    "reading the file failed: " + std::generic_category().message(errno));
-  return parse_loop_csv(text, options, path, notes);
+  // Read line by line: memory follows the rows kept, not the file's size.
+  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(f, &std::fclose);
+  Lines lines(f, path);
+  return parse_lines(lines, options, path, notes);
 }
 
 }  // namespace valvediag

@@ -85,8 +85,8 @@ TEST_CASE("configs/sim-site.toml and configs/can-site.toml load") {
 
 TEST_CASE("config errors name the line, the key and what to do") {
   const std::string loop =
-      "[[loop]]\nname = \"A\"\nbus = \"p\"\nop = { address = 0, type = \"FLOAT32\" }\n"
-      "pv = { address = 2, type = \"FLOAT32\" }\n";
+      "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
+      "op = { address = 0, type = \"FLOAT32\" }\npv = { address = 2, type = \"FLOAT32\" }\n";
   CHECK_NOTHROW(parse_site_config(std::string(kBus) + loop, "t.toml"));
 
   auto e = error_of(std::string(kBus) + "slave = 3\n" + loop);
@@ -98,16 +98,17 @@ TEST_CASE("config errors name the line, the key and what to do") {
   CHECK(std::string(e.what()).find("no bus named 'q'") != std::string::npos);
 
   e = error_of(std::string(kBus) + loop + "sp = { address = 3, type = \"FLOAT32\" }\n");
-  CHECK(e.line() == 10);
+  CHECK(e.line() == 11);
   CHECK(std::string(e.what()).find("overlaps pv at holding register 3") != std::string::npos);
 
   e = error_of(std::string(kBus) +
-               "[[loop]]\nname = \"A\"\nbus = \"p\"\nop = { address = 0, type = \"REAL\" }\n");
-  CHECK(e.line() == 8);
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
+               "op = { address = 0, type = \"REAL\" }\n");
+  CHECK(e.line() == 9);
   CHECK(e.key() == "loop[0].op.type");
 
   e = error_of(std::string(kBus) +
-               "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
                "op = { address = 0, type = \"INT16\" }\n");
   CHECK(std::string(e.what()).find("missing pv") != std::string::npos);
 
@@ -118,14 +119,17 @@ TEST_CASE("config errors name the line, the key and what to do") {
 
   e = error_of(std::string(kBus) + "timeout = \"fast\"\n" + loop);
   CHECK(e.line() == 5);
-  e = error_of(std::string(kBus) + loop + "sample_period = \"-1s\"\n");
-  CHECK(e.line() == 10);
+  e = error_of(
+      std::string(kBus) +
+      "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"-1s\"\n"
+      "op = { address = 0, type = \"FLOAT32\" }\npv = { address = 2, type = \"FLOAT32\" }\n");
+  CHECK(e.line() == 8);
   e = error_of(std::string(kBus) + loop + "op_range = [100, 0]\n");
-  CHECK(e.line() == 10);
-  e = error_of(std::string(kBus) + loop + "[[fault]]\nkind = \"explode\"\n");
   CHECK(e.line() == 11);
+  e = error_of(std::string(kBus) + loop + "[[fault]]\nkind = \"explode\"\n");
+  CHECK(e.line() == 12);
   e = error_of(std::string(kBus) + loop +
-               "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
                "op = { address = 9, type = \"INT16\" }\n"
                "pv = { address = 8, type = \"INT16\" }\n");
   CHECK(std::string(e.what()).find("defined twice") != std::string::npos);
@@ -143,11 +147,88 @@ TEST_CASE("config errors name the line, the key and what to do") {
   // A DBC signal that is not in the DBC.
   e = error_of(
       "[[bus]]\nname = \"c\"\nprotocol = \"socketcan\"\ninterface = \"can0\"\n"
-      "dbc = \"plant.dbc\"\n[[loop]]\nname = \"A\"\nbus = \"c\"\n"
+      "dbc = \"plant.dbc\"\n[[loop]]\nname = \"A\"\nbus = \"c\"\nsample_period = \"1s\"\n"
       "op = { message = \"VALVE_FIC101\", signal = \"OUT\" }\n"
       "pv = { message = \"VALVE_FIC101\", signal = \"PV\" }\n");
-  CHECK(e.line() == 9);
+  CHECK(e.line() == 10);
   CHECK(std::string(e.what()).find("no signal 'OUT'") != std::string::npos);
+}
+
+TEST_CASE("values once taken silently are errors at their line: issue 34 item 9") {
+  const std::string points =
+      "op = { address = 0, type = \"FLOAT32\" }\npv = { address = 2, type = \"FLOAT32\" }\n";
+  // A missing sample_period no longer becomes 1 s.
+  auto e = error_of(std::string(kBus) + "[[loop]]\nname = \"A\"\nbus = \"p\"\n" + points);
+  CHECK(std::string(e.what()) ==
+        "t.toml:5:1: loop[0]: missing key 'sample_period'; add sample_period = \"1s\" (how often "
+        "the recorder polls this loop)");
+  const std::string loop = "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n";
+
+  // Port 0, and a port left empty.
+  e = error_of(
+      "[[bus]]\nname = \"p\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://10.0.0.1:0\"\n" +
+      loop + points);
+  CHECK(
+      std::string(e.what()) ==
+      "t.toml:4:14: bus[0].controller: port '0' is not 1..65535 (Modbus TCP is usually 502; for a "
+      "free port of the simulated PLC use sim-plc --port 0)");
+  e = error_of(
+      "[[bus]]\nname = \"p\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://10.0.0.1:\"\n" +
+      loop + points);
+  CHECK(e.line() == 4);
+  CHECK(parse_site_config("[[bus]]\nname = \"p\"\nprotocol = \"modbus-tcp\"\ncontroller = "
+                          "\"tcp://10.0.0.1:65535\"\n" +
+                              loop + points,
+                          "t.toml")
+            .buses[0]
+            .port == 65535);
+
+  // A 16-bit type with a 32-bit byte order, and the reverse.
+  e = error_of(std::string(kBus) + loop +
+               "op = { address = 0, type = \"INT16\", byte_order = \"CDAB\" }\n"
+               "pv = { address = 2, type = \"FLOAT32\" }\n");
+  CHECK(
+      std::string(e.what()) ==
+      "t.toml:9:50: loop[0].op.byte_order: 'CDAB' orders the 4 bytes of a 32-bit value, but "
+      "INT16 is one register: write \"AB\" or \"BA\", or give the 32-bit type the registers hold");
+  e = error_of(std::string(kBus) + loop + "op = { address = 0, type = \"FLOAT32\" }\n" +
+               "pv = { address = 2, type = \"UINT32\", byte_order = \"BA\" }\n");
+  CHECK(e.line() == 10);
+  CHECK(e.key() == "loop[0].pv.byte_order");
+  CHECK(std::string(e.what()).find("UINT32 spans two: write ABCD, CDAB, BADC or DCBA") !=
+        std::string::npos);
+  const SiteConfig ok = parse_site_config(
+      std::string(kBus) + loop + "op = { address = 0, type = \"INT16\", byte_order = \"BA\" }\n" +
+          "pv = { address = 2, type = \"UINT16\" }\n",
+      "t.toml");
+  CHECK(ok.loops[0].point(PointName::op).order == ByteOrder::badc);
+  CHECK(ok.loops[0].point(PointName::pv).order == ByteOrder::abcd);
+
+  // A NUL inside a string (TOML's \u0000 escape), in a value and in a key.
+  e = error_of(std::string(kBus) + "[[loop]]\nname = \"FIC\\u0000101\"\nbus = \"p\"\n" +
+               "sample_period = \"1s\"\n" + points);
+  CHECK(std::string(e.what()) ==
+        "t.toml:6:8: loop[0].name: holds a NUL character (\\u0000); remove it");
+  e = error_of(
+      "[[bus]]\nname = \"p\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://a:502\"\n"
+      "\"x\\u0000y\" = 1\n" +
+      loop + points);
+  CHECK(e.line() == 5);
+  CHECK(e.key() == "bus[0].x?y");
+
+  // Names that differ only in case.
+  e = error_of(std::string(kBus) +
+               "[[loop]]\nname = \"FIC101\"\nbus = \"p\"\nsample_period = \"1s\"\n" + points +
+               "[[loop]]\nname = \"fic101\"\nbus = \"p\"\nsample_period = \"1s\"\n" + points);
+  CHECK(std::string(e.what()) ==
+        "t.toml:12:8: loop[1].name: loop 'fic101' differs from loop 'FIC101' (line 5) only in "
+        "upper and lower case; give the loops distinct names");
+  e = error_of(std::string(kBus) +
+               "[[bus]]\nname = \"P\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://a:502\"\n" +
+               loop + points);
+  CHECK(e.line() == 6);
+  CHECK(std::string(e.what()).find("bus 'P' differs from bus 'p' (line 1) only in upper and lower "
+                                   "case") != std::string::npos);
 }
 
 TEST_CASE(
@@ -170,8 +251,8 @@ TEST_CASE(
   // Off by default.
   const SiteConfig d = parse_site_config(
       std::string(kBus) +
-          "[[loop]]\nname = \"A\"\nbus = \"p\"\nop = { address = 0, type = \"FLOAT32\" }\n"
-          "pv = { address = 2, type = \"FLOAT32\" }\n",
+          "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
+          "op = { address = 0, type = \"FLOAT32\" }\npv = { address = 2, type = \"FLOAT32\" }\n",
       "t.toml");
   CHECK(d.loops[0].point(PointName::pv).stale_after_s == 0.0);
 
@@ -184,17 +265,17 @@ TEST_CASE(
   CHECK(e.key() == "loop[0].stale_after");
   CHECK(std::string(e.what()).find("longer than the sample period (1 s)") != std::string::npos);
   e = error_of(std::string(kBus) +
-               "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+               "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
                "op = { address = 0, type = \"FLOAT32\" }\n"
                "pv = { address = 2, type = \"FLOAT32\", stale_after = \"never\" }\n");
-  CHECK(e.line() == 9);
+  CHECK(e.line() == 10);
   CHECK(e.key() == "loop[0].pv.stale_after");
   CHECK(std::string(e.what()).find("must be a duration") != std::string::npos);
 }
 
 TEST_CASE("CAN interface \"unix:PATH\" (the simulated PLC's socket) and the freeze fault") {
   const std::string loop =
-      "[[loop]]\nname = \"A\"\nbus = \"c\"\n"
+      "[[loop]]\nname = \"A\"\nbus = \"c\"\nsample_period = \"1s\"\n"
       "op = { frame_id = 0x100, start_bit = 0, length = 16 }\n"
       "pv = { frame_id = 0x100, start_bit = 16, length = 16 }\n";
   SiteConfig s = parse_site_config(
@@ -212,7 +293,7 @@ TEST_CASE("CAN interface \"unix:PATH\" (the simulated PLC's socket) and the free
   CHECK(std::string(e.what()).find("no socket path") != std::string::npos);
 
   s = parse_site_config(std::string(kBus) +
-                            "[[loop]]\nname = \"A\"\nbus = \"p\"\n"
+                            "[[loop]]\nname = \"A\"\nbus = \"p\"\nsample_period = \"1s\"\n"
                             "op = { address = 0, type = \"FLOAT32\" }\n"
                             "pv = { address = 2, type = \"FLOAT32\" }\n"
                             "[[fault]]\nkind = \"freeze\"\naddress = 2\nstart = \"1s\"\n",

@@ -5,6 +5,8 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <utility>
 
 #include "fuzz_bus_harness.hpp"
 
@@ -55,4 +57,34 @@ TEST_CASE("the seeds parse rather than being refused") {
   std::stringstream ss;
   ss << in.rdbuf();
   CHECK(valvediag::parse_dbc(ss.str(), "mux_ext.dbc").messages.size() == 2);
+}
+
+TEST_CASE("the bad site seeds are refused at their line, saying what to do") {
+  const std::pair<const char*, const char*> seeds[] = {
+      {"bad_no_sample_period.toml",
+       "bad_no_sample_period.toml:5:1: loop[0]: missing key 'sample_period'; add"},
+      {"bad_port_0.toml", "bad_port_0.toml:4:14: bus[0].controller: port '0' is not 1..65535"},
+      {"bad_byte_order_width.toml",
+       "bad_byte_order_width.toml:9:72: loop[0].op.byte_order: 'CDAB' orders the 4 bytes"},
+      {"bad_nul_in_string.toml",
+       "bad_nul_in_string.toml:9:12: loop[0].simulate: holds a NUL character"},
+      {"bad_names_differ_in_case.toml",
+       "bad_names_differ_in_case.toml:12:8: loop[1].name: loop 'fic101' differs from loop "
+       "'FIC101' (line 5) only in upper and lower case"},
+  };
+  for (const auto& [name, start] : seeds) {
+    INFO(std::string(name));
+    std::ifstream in(kFuzz / "corpus" / "site_config" / name);
+    REQUIRE(in);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    std::string what = "no error";
+    try {
+      valvediag::parse_site_config(ss.str(), name, "");
+    } catch (const valvediag::SiteConfigError& e) {
+      what = e.what();
+    }
+    INFO(what);
+    CHECK(what.rfind(start, 0) == 0);
+  }
 }

@@ -233,7 +233,8 @@ TEST_CASE(
 TEST_CASE("the simulated PLC refuses a loop on a Modbus bus it does not serve, naming it") {
   const std::string loop =
       "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
-      "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\nsimulate = \"kano\"\n";
+      "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\nsimulate = \"kano\"\n"
+      "sample_period = \"1s\"\n";
   const std::string two_tcp =
       "[[bus]]\nname = \"a\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:1502\"\n"
       "[[bus]]\nname = \"b\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:1503\"\n"
@@ -241,7 +242,7 @@ TEST_CASE("the simulated PLC refuses a loop on a Modbus bus it does not serve, n
       loop + "[[loop]]\nname = \"B1\"\nbus = \"b\"\n" + loop;
   CHECK_THROWS_WITH_AS(
       SimPlc(parse_site_config(two_tcp, "two.toml"), SimPlcOptions{1.0, 0}),
-      "two.toml:15: loop 'B1' is on bus 'b' (modbus-tcp, line 5); the simulated PLC serves one "
+      "two.toml:16: loop 'B1' is on bus 'b' (modbus-tcp, line 5); the simulated PLC serves one "
       "Modbus TCP bus, 'a' (line 1): move the loop to that bus, or serve bus 'b' with a second "
       "sim-plc from a site file of its own",
       std::invalid_argument);

@@ -148,6 +148,30 @@ TEST_CASE("bad input data: clear message and exit status 2") {
     auto ok = run("fit " + tmp("irregular.csv") + kSmallGrid + " --resample");
     CHECK(ok.status == 0);
   }
+  SUBCASE("more rows than --max-rows, and /dev/zero, are refused") {
+    write(tmp("rows.csv"), loop_csv(800));
+    auto r = run("fit " + tmp("rows.csv") + " --max-rows 500");
+    CHECK(r.status == 2);
+    CHECK(r.out.find("rows.csv:502: more than 500 data rows, the --max-rows limit") !=
+          std::string::npos);
+    CHECK(run("fit " + tmp("rows.csv") + " --max-rows 1").status == 2);
+    // Not wrapped round to a huge unsigned cap.
+    auto neg = run("fit " + tmp("rows.csv") + " --max-rows -3");
+    CHECK(neg.status == 2);
+    CHECK(neg.out.find("--max-rows: Value -3 not in range 2 to 1000000000000") !=
+          std::string::npos);
+    // The whole-file read grew to gigabytes here: with a time limit, so it cannot hang the test.
+    const std::string cmd = std::string("timeout 60 ") + VALVEDIAG_BIN + " fit /dev/zero 2>&1";
+    FILE* p = popen(cmd.c_str(), "r");
+    REQUIRE(p != nullptr);
+    std::string out;
+    char buf[512];
+    while (std::fgets(buf, sizeof buf, p)) out += buf;
+    const int st = pclose(p);
+    CHECK(WIFEXITED(st));
+    CHECK(WEXITSTATUS(st) == 2);  // timeout(1) would give 124
+    CHECK(out.find("/dev/zero:1: the line is longer than 1 MiB") != std::string::npos);
+  }
   SUBCASE("bad option values") {
     write(tmp("ok.csv"), loop_csv(800));
     CHECK(run("fit " + tmp("ok.csv") + " --validate 1.5").status == 2);

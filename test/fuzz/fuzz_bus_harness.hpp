@@ -4,6 +4,7 @@
 // refused with the documented error), otherwise what is wrong. Other exceptions escape: bugs.
 #pragma once
 
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -26,6 +27,28 @@ inline std::string run_site_config(std::string_view text) {
     return "";
   }
   if (s.loops.empty()) return "accepted a site without loops";
+  // Written apart from the loader's check, so that one checks the other.
+  auto same_but_case = [](std::string a, std::string b) {
+    if (a == b) return false;
+    for (std::string* x : {&a, &b})
+      for (char& c : *x) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return a == b;
+  };
+  for (std::size_t i = 0; i < s.buses.size(); ++i) {
+    const BusConfig& b = s.buses[i];
+    if (b.kind == BusKind::modbus_tcp && (b.port < 1 || b.port > 65535))
+      return "Modbus TCP port outside 1..65535 accepted";
+    for (const std::string* v : {&b.host, &b.device, &b.interface, &b.dbc})
+      if (v->find('\0') != std::string::npos) return "NUL in a bus string accepted";
+    for (std::size_t j = 0; j < i; ++j)
+      if (same_but_case(b.name, s.buses[j].name)) return "bus names equal but for case accepted";
+  }
+  for (std::size_t i = 0; i < s.loops.size(); ++i) {
+    if (s.loops[i].simulate.find('\0') != std::string::npos) return "NUL in simulate accepted";
+    for (std::size_t j = 0; j < i; ++j)
+      if (same_but_case(s.loops[i].name, s.loops[j].name))
+        return "loop names equal but for case accepted";
+  }
   for (const auto& l : s.loops) {
     const BusConfig* b = s.find_bus(l.bus);
     if (!b) return "loop on an unknown bus accepted";

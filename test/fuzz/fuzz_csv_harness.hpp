@@ -8,6 +8,7 @@
 #include <string_view>
 
 #include "valvediag/csv_reader.hpp"
+#include "valvediag/data_checks.hpp"
 #include "valvediag/data_error.hpp"
 
 namespace valvediag::fuzz {
@@ -40,7 +41,8 @@ inline CsvOptions options_from(std::string_view& data) {
                     .mv_column = c[4],
                     .resample = ((a >> 5) & 1) != 0,
                     .sample_period = period,
-                    .decimal = (b >> 3) & 1 ? ',' : '.'};
+                    .decimal = (b >> 3) & 1 ? ',' : '.',
+                    .max_rows = (b >> 6) & 1 ? 4u : kDefaultMaxRows};
 }
 
 // "" when the input parsed into consistent data or was refused with a DataError; otherwise what
@@ -59,11 +61,15 @@ inline std::string run_csv(std::string_view data) {
   if (d.op.size() != n || d.pv.size() != n) return "op/pv length differs from t";
   if (!(d.sp.empty() || d.sp.size() == n) || !(d.mv.empty() || d.mv.size() == n))
     return "sp/mv length differs from t";
+  if (!o.resample && n > o.max_rows) return "more rows than max_rows accepted";
   for (std::size_t i = 0; i < n; ++i) {
     if (!std::isfinite(d.t[i]) || !std::isfinite(d.op[i]) || !std::isfinite(d.pv[i]))
       return "non-finite value accepted";
     if ((!d.sp.empty() && !std::isfinite(d.sp[i])) || (!d.mv.empty() && !std::isfinite(d.mv[i])))
       return "non-finite sp/mv accepted";
+    // A historian's bad-value marker (1e308, DBL_MAX) is no measurement.
+    if (std::fabs(d.op[i]) > kMaxSignalMagnitude || std::fabs(d.pv[i]) > kMaxSignalMagnitude)
+      return "op/pv beyond kMaxSignalMagnitude accepted";
     if (i > 0 && !(d.t[i] > d.t[i - 1])) return "time not increasing";
   }
   bool constant = true;

@@ -1,4 +1,7 @@
 #include <doctest/doctest.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <charconv>
@@ -7,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/data_error.hpp"
@@ -509,7 +513,7 @@ TEST_CASE("bad options and encodings") {
 }
 
 TEST_CASE("very long lines and cells do not blow up the messages") {
-  const std::string junk(1 << 20, 'x');
+  const std::string junk(1 << 19, 'x');  // half the 1 MiB line limit
   const std::string msg = parse_error("t,op,pv\n0,1,2\n1,2," + junk + "\n").what();
   CHECK(msg ==
         "data.csv:3: column 'pv': 'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...' is not a number "
@@ -544,4 +548,114 @@ TEST_CASE("a million rows") {
   CHECK(d.pv[999'999] == d.op[999'999] * 0.5 + 3);
   // Speed is reported, not asserted: a timed check flakes on a loaded machine.
   MESSAGE("parsed 10^6 rows in " << seconds << " s");
+}
+
+TEST_CASE("a file is read in chunks: the same rows as in memory, whatever the line ends") {
+  TempDir dir;
+  // Well over one 64 KiB chunk, so that rows straddle the chunk boundaries.
+  for (const char* eol : {"\n", "\r\n", "\r"}) {
+    std::string text = std::string("\xEF\xBB\xBF") + "t,op,pv" + eol;
+    for (int k = 0; k < 20000; ++k)
+      text += std::to_string(k) + "," + std::to_string(k % 7) + "," + std::to_string(k * 3) + eol;
+    const std::string p = dir.write("big.csv", text);
+    const LoopData f = read_loop_csv(p, {});
+    const LoopData m = parse(text);
+    REQUIRE(f.size() == 20000);
+    CHECK(f.t == m.t);
+    CHECK(f.op == m.op);
+    CHECK(f.pv == m.pv);
+    CHECK(f.t.back() == 19999);
+    CHECK(f.pv.back() == 59997);
+  }
+}
+
+TEST_CASE("more data rows than max_rows are refused at the first row beyond") {
+  TempDir dir;
+  std::string text = "t,op,pv\n# a comment is not a row\n";
+  for (int k = 0; k < 101; ++k) text += std::to_string(k) + "," + std::to_string(k % 3) + ",1\n";
+  const std::string p = dir.write("rows.csv", text);
+  CsvOptions o;
+  o.max_rows = 101;
+  CHECK(read_loop_csv(p, o).size() == 101);
+  o.max_rows = 100;
+  // Row 101 is line 103: the header, the comment, then 100 rows.
+  CHECK_THROWS_WITH_AS(read_loop_csv(p, o),
+                       (p + ":103: more than 100 data rows, the --max-rows limit that keeps "
+                            "memory bounded (about 50 bytes a row); give --max-rows with a larger "
+                            "number to read it all, or cut the file into shorter records")
+                           .c_str(),
+                       DataError);
+  o.max_rows = 1;
+  CHECK_THROWS_WITH_AS(
+      parse(text, o), "data.csv: --max-rows must be at least 2 (a fit needs 2 samples)", DataError);
+  CHECK(CsvOptions{}.max_rows == 10'000'000);
+}
+
+TEST_CASE("a line longer than 1 MiB is an error at its line, in a file and in memory") {
+  TempDir dir;
+  const std::string text = "t,op,pv\n0,1,2\n" + std::string((1 << 20) + 1, '7') + "\n2,3,4\n";
+  const std::string p = dir.write("long.csv", text);
+  const std::string problem =
+      ":3: the line is longer than 1 MiB (no line end within it): this is not a text data file "
+      "(binary data, or a device such as /dev/zero?); give a CSV file";
+  CHECK_THROWS_WITH_AS(read_loop_csv(p, {}), (p + problem).c_str(), DataError);
+  CHECK_THROWS_WITH_AS(parse(text), ("data.csv" + problem).c_str(), DataError);
+  // Exactly 1 MiB is still a line (a non-numeric cell, then).
+  const std::string at_limit = "t,op,pv\n0,1,2\n" + std::string(1 << 20, '7') + "\n";
+  CHECK_THROWS_WITH_AS(read_loop_csv(dir.write("limit.csv", at_limit), {}),
+                       doctest::Contains("limit.csv:3: column 'op': the row has only 1 cells"),
+                       DataError);
+}
+
+TEST_CASE("/dev/zero is refused quickly with bounded memory") {
+  if (!fs::exists("/dev/zero")) return;
+  // In a child process, so that a reader that never stops is killed instead of hanging the test,
+  // and its peak memory is its own.
+  int fds[2];
+  REQUIRE(::pipe(fds) == 0);
+  const pid_t pid = ::fork();
+  REQUIRE(pid >= 0);
+  if (pid == 0) {
+    ::close(fds[0]);
+    int code = 1;
+    std::string what = "no error";
+    try {
+      read_loop_csv("/dev/zero", {});
+    } catch (const DataError& e) {
+      what = e.what();
+      code = 3;
+    }
+    (void)!::write(fds[1], what.data(), what.size());
+    ::_exit(code);
+  }
+  ::close(fds[1]);
+  rusage before{};
+  ::getrusage(RUSAGE_SELF, &before);
+  const auto start = std::chrono::steady_clock::now();
+  int status = 0;
+  rusage child{};
+  bool done = false;
+  while (!done && std::chrono::steady_clock::now() - start < std::chrono::seconds(30)) {
+    done = ::wait4(pid, &status, WNOHANG, &child) == pid;
+    if (!done) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  if (!done) {
+    ::kill(pid, SIGKILL);
+    ::wait4(pid, &status, 0, &child);
+  }
+  std::string what;
+  char buf[512];
+  for (ssize_t k; (k = ::read(fds[0], buf, sizeof buf)) > 0;)
+    what.append(buf, static_cast<std::size_t>(k));
+  ::close(fds[0]);
+  REQUIRE(done);
+  CHECK(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 3);
+  CHECK(what.rfind("/dev/zero:1: the line is longer than 1 MiB", 0) == 0);
+  // ru_maxrss is in KiB. The child starts with this process's pages; it may add its 1 MiB
+  // line buffer and change, not the gigabytes the whole-file read took.
+  const long grown_kib = child.ru_maxrss - before.ru_maxrss;
+  MESSAGE("/dev/zero: child peak RSS " << child.ru_maxrss << " KiB, this process "
+                                       << before.ru_maxrss << " KiB");
+  CHECK(grown_kib < 64 * 1024);
 }
