@@ -20,7 +20,8 @@
 namespace valvediag::cli {
 
 void check_report_writable(const std::string& path) {
-  if (path.empty()) throw UsageError("--out: give the HTML file to write");
+  if (path.empty())
+    throw UsageError("--out FILE: give the HTML file to write, e.g. --out report.html");
   if (std::filesystem::is_directory(path))
     throw UsageError("--out " + path + " is a directory: give a file name, e.g. report.html");
   try {
@@ -85,7 +86,8 @@ void add_report(CLI::App& app, int& exit_code) {
                   "the model to fit and show, e.g. preisach, stiction+saturation (default: the "
                   "last model of the data's ladder, else preisach)")
       ->group(g);
-  cmd->add_option("--out", a->out, "the HTML file to write (default: DATA.report.html)")->group(g);
+  // Never a default beside the data: a shared folder of exports is not ours to write in.
+  cmd->add_option("--out", a->out, "the HTML file to write (required)")->group(g);
   cmd->add_option("--validate", a->validate, "fraction of the record held out for validation")
       ->group(g)
       ->capture_default_str();
@@ -114,7 +116,7 @@ void add_report(CLI::App& app, int& exit_code) {
     if (!a->model.empty()) spec = parse_model_spec(a->model);  // bad names: exit status 2
     const OpRange range = parse_op_range(a->op_range);
     const std::string name = data_name(a->data);
-    const std::string out = a->out.empty() ? name + ".report.html" : a->out;
+    const std::string& out = a->out;
     ReportOptions ro;
     ro.gnuplot.program = a->gnuplot;
     ro.gnuplot.timeout_s = a->timeout;

@@ -111,6 +111,12 @@ TEST_CASE("report: user errors exit 2 with a clear message and leave no file") {
     const Run d = run("report " + csv + " --out " + std::string(VALVEDIAG_TMP));
     CHECK(d.status == 2);
   }
+  SUBCASE("no --out: no page beside the data, nor anywhere") {
+    const Run r = run("report " + csv + " --no-plots --no-diagnose");
+    CHECK(r.status == 2);
+    CHECK(r.out.find("--out FILE: give the HTML file to write") != std::string::npos);
+    CHECK(!std::filesystem::exists(csv + ".report.html"));
+  }
   SUBCASE("no data, or a missing file") {
     CHECK(run("report --out " + tmp("x.html")).status == 2);
     CHECK(run("report " + tmp("no-such.csv") + " --out " + tmp("x.html")).status == 2);
