@@ -169,6 +169,7 @@ void add_demo(CLI::App& app, int& exit_code) {
     std::string json_path = a->json;
     const std::string csv = (fs::path(a->out_dir) / "fic101.csv").string();
     const std::string report = (fs::path(a->out_dir) / "report.html").string();
+    // The demo's history stays in its own folder with its other files, not in the state directory.
     const std::string history = history_path_for(csv);
     const std::string db = (fs::path(a->out_dir) / "demo.sqlite").string();
     fs::create_directories(a->out_dir);
@@ -244,7 +245,8 @@ void add_demo(CLI::App& app, int& exit_code) {
     if (!a->offline) std::cout << "  recording       " << db << "\n";
     std::cout << "  data (CSV)      " << csv << "\n";
     if (!json_path.empty()) std::cout << "  model (JSON)    " << json_path << "\n";
-    std::cout << "  model history   " << history << "   (valvediag ladder " << csv << ")\n"
+    std::cout << "  model history   " << history << "   (valvediag ladder " << csv << " --history "
+              << history << ")\n"
               << "  report (HTML)   " << report << "\n";
     exit_code = kOk;
   });

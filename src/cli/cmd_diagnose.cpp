@@ -5,6 +5,7 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "fit_runner.hpp"
+#include "history_options.hpp"
 #include "valvediag/atomic_file.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/diagnosis_report.hpp"
@@ -38,10 +39,11 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     DataOptions data;
     std::string model = "linear";
     double validate = 0.3;
-    bool autoclimb = false, no_history = false, keep_lead_in = false, split_check = false;
+    bool autoclimb = false, keep_lead_in = false, split_check = false;
     double min_gain = 2.0;
     std::vector<std::string> candidates;
     std::string json, op_range;
+    HistoryOptions hist;
   };
   auto a = std::make_shared<Args>();
   add_data_options(cmd, a->data);
@@ -65,8 +67,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
   cmd->add_flag("--split-check", a->split_check,
                 "diagnose again with 0.05 less and 0.05 more held out and say whether the verdict "
                 "holds (about 3x the time)");
-  cmd->add_flag("--no-history", a->no_history,
-                "do not add the fits to the model history next to the data");
+  add_history_options(cmd, a->hist, "History");
   cmd->callback([a, &exit_code] {
     const std::vector<double> shares = split_check_shares(a->validate, a->split_check);
     const ModelSpec spec = parse_model_spec(a->model);
@@ -74,6 +75,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     std::vector<std::string> notes;
     const LoopData whole = load_data(a->data, notes);
     check_identifiable_data(whole, 200, "a diagnosis");
+    const std::string history = history_file(a->hist, a->data, whole);
     // The same part of the record a sweep diagnoses (quiet_lead_in.hpp).
     const AnalysedPart part = analysed_part(whole, a->keep_lead_in, range, notes);
     const std::string& unusable = part.unusable;
@@ -120,18 +122,11 @@ void add_diagnose(CLI::App& app, int& exit_code) {
       write_file_atomically(a->json, j.dump(2) + "\n");
       std::cout << "wrote " << a->json << "\n";
     }
-    if (!a->no_history) {
+    if (!a->hist.off) {
       std::vector<HistoryEntry> entries;
       for (const auto& s : r.steps)
         entries.push_back(history_entry(s.fit, a->autoclimb ? "diagnose --auto" : "diagnose"));
-      const std::string path = history_path_for(data_name(a->data));
-      std::string why;
-      if (try_append_history(path, entries, why))
-        std::cout << "model history: " << path << " (valvediag ladder " << data_name(a->data)
-                  << ")\n";
-      else
-        std::cerr << "warning: " << why
-                  << "; the diagnosis above stands (--no-history skips this)\n";
+      record_history(history, entries, "the diagnosis above");
     }
     exit_code = kOk;
   });
@@ -141,27 +136,32 @@ void add_ladder(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
       "ladder", "Print the model ladder of a data file: each fit, its fitness, the change");
   cmd->footer(
+      "The history is found by the data's content and the options that read it: give the same\n"
+      "input options as to fit and diagnose, or the same --history FILE.\n"
       "Examples:\n  valvediag diagnose loop.csv --auto && valvediag ladder loop.csv\n"
       "  valvediag ladder --db site.sqlite --loop FIC101");
   struct Args {
-    std::string data, db, loop;
+    DataOptions data;
+    HistoryOptions hist{"", true};  // only read: no "going on without" warning
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("data", a->data, "the data file whose history to show");
-  cmd->add_option("--db", a->db, "a recording: show the history of --loop in it");
-  cmd->add_option("--loop", a->loop, "the recorded loop (with --db), or the loop in a .mat file");
+  add_data_options(cmd, a->data);
+  add_history_options(cmd, a->hist, "History", false);
   cmd->callback([a, &exit_code] {
-    if (a->data.empty() == a->db.empty())
-      throw UsageError("give a data file or --db site.sqlite --loop NAME (one of them)");
-    if (!a->db.empty() && a->loop.empty()) throw UsageError("--db needs --loop NAME");
-    // The names data_name() gives: the file, FILE.mat.PATH, or site.sqlite.LOOP.
-    const std::string name = a->db.empty() ? (a->loop.empty() ? a->data : a->data + "." + a->loop)
-                                           : a->db + "." + a->loop;
-    const std::string path = history_path_for(name);
+    if (!a->data.db.empty() && a->data.loop.empty()) throw UsageError("--db needs --loop NAME");
+    std::vector<std::string> notes;
+    const LoopData d = load_data(a->data, notes);
+    const std::string name = data_name(a->data);
+    const std::string path = history_file(a->hist, a->data, d);
+    if (path.empty()) {
+      std::string why;
+      (void)history_state_dir(why);
+      throw UsageError(why);
+    }
     const auto entries = load_history(path);
-    const std::string source = a->db.empty()
-                                   ? a->data + (a->loop.empty() ? "" : " --loop " + a->loop)
-                                   : "--db " + a->db + " --loop " + a->loop;
+    const std::string source =
+        a->data.db.empty() ? a->data.data + (a->data.loop.empty() ? "" : " --loop " + a->data.loop)
+                           : "--db " + a->data.db + " --loop " + a->data.loop;
     if (entries.empty())
       throw UsageError("no model history for " + name + " (" + path +
                        "): run 'valvediag diagnose " + source + " --auto' or 'valvediag fit " +

@@ -8,6 +8,7 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "fit_runner.hpp"
+#include "history_options.hpp"
 #include "valvediag/atomic_file.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/csv_writer.hpp"
@@ -35,7 +36,7 @@ struct FitArgs {
   bool no_merge = false;
   std::string model;  // a composable model instead of the Preisach identification
   std::vector<std::string> add, remove;
-  bool no_history = false;
+  HistoryOptions hist;   // --history, --no-history
   bool verdict = false;  // --verdict: the loop's one verdict too (loop_verdict.hpp)
 };
 
@@ -166,13 +167,8 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const st
                       {d.t, d.op, d.pv, f.x_hat, f.y_sim, res});
     std::cout << "wrote " << a.series << "\n";
   }
-  if (!a.no_history && f.status != ModelFitStatus::NoStableModel) {
-    std::string why;
-    if (try_append_history(history, {history_entry(f, "fit")}, why))
-      std::cout << "model history: " << history << "\n";
-    else
-      std::cerr << "warning: " << why << "; the fit above stands (--no-history skips this)\n";
-  }
+  if (!a.hist.off && f.status != ModelFitStatus::NoStableModel)
+    record_history(history, {history_entry(f, "fit")}, "the fit above");
   return f.status == ModelFitStatus::NoStableModel ? kNoModel : kOk;
 }
 
@@ -272,9 +268,7 @@ void add_fit(CLI::App& app, int& exit_code) {
       ->group(g_e);
   cmd->add_option("--remove", a->remove, "remove an effect from the last model of this data")
       ->group(g_e);
-  cmd->add_flag("--no-history", a->no_history,
-                "do not add this fit to the model history next to the data")
-      ->group(g_e);
+  add_history_options(cmd, a->hist, g_e);
   cmd->add_flag("--verdict", a->verdict,
                 "also give the loop's verdict and stiction size, the same as diagnose, report and "
                 "sweep give (diagnose --auto from linear: seconds more; JSON key verdict)")
@@ -287,6 +281,8 @@ void add_fit(CLI::App& app, int& exit_code) {
     const OpRange range = parse_op_range(a->op_range);
     if (a->output == "mv" && a->in.csv.mv_column.empty()) a->in.csv.mv_column = "mv";
     LoopData d = load_data(a->in, notes);
+    // Keyed by the data as read, before --validate A:B cuts it.
+    const std::string history = history_file(a->hist, a->in, d);
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     const LoopData whole = a->verdict ? d : LoopData{};  // --validate A:B may cut d below
     FitOptions& fo = a->fit;
@@ -320,13 +316,26 @@ void add_fit(CLI::App& app, int& exit_code) {
       lv = loop_verdict(whole, verdict_options(range, share, false, whole.t.front()));
     }
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
-    const std::string history = history_path_for(data_name(a->in));
     if (!a->model.empty() || !a->add.empty() || !a->remove.empty()) {
       exit_code = fit_spec(d, *a, fo, history, lv ? &*lv : nullptr);
       return;
     }
     FitRun run = run_fit(d, fo, a->output, range);
-    if (!a->no_history && run.result.status == IdentificationStatus::Ok) {
+    std::cout << run.summary;
+    if (lv) {
+      std::cout << verdict_text(*lv, true);
+      add_verdict_json(run.json, *lv);
+    }
+    if (!a->json.empty()) {
+      write_file_atomically(a->json, run.json.dump(2) + "\n");
+      std::cout << "wrote " << a->json << "\n";
+    }
+    if (!a->series.empty() && run.result.status == IdentificationStatus::Ok) {
+      write_series(a->series, d, run);
+      std::cout << "wrote " << a->series << "\n";
+    }
+    // Last: the answer above is never lost for the side file.
+    if (!a->hist.off && run.result.status == IdentificationStatus::Ok) {
       HistoryEntry h;
       h.model = "preisach:general";  // the core method alone (the paper's)
       h.fitness_percent = run.result.fitness_percent;
@@ -340,20 +349,7 @@ void add_fit(CLI::App& app, int& exit_code) {
           {"preisach.nonzero_weights", static_cast<double>(run.result.best.nonzero_weights), ""});
       h.command = "fit";
       h.time = utc_timestamp();
-      append_history(history, {h});
-    }
-    std::cout << run.summary;
-    if (lv) {
-      std::cout << verdict_text(*lv, true);
-      add_verdict_json(run.json, *lv);
-    }
-    if (!a->json.empty()) {
-      write_file_atomically(a->json, run.json.dump(2) + "\n");
-      std::cout << "wrote " << a->json << "\n";
-    }
-    if (!a->series.empty() && run.result.status == IdentificationStatus::Ok) {
-      write_series(a->series, d, run);
-      std::cout << "wrote " << a->series << "\n";
+      record_history(history, {h}, "the fit above");
     }
     exit_code = run.result.status == IdentificationStatus::Ok ? kOk : kNoModel;
   });

@@ -9,6 +9,7 @@
 
 #include "commands.hpp"
 #include "data_options.hpp"
+#include "history_options.hpp"
 #include "valvediag/atomic_file.hpp"
 #include "valvediag/data_checks.hpp"
 #include "valvediag/html_report.hpp"
@@ -19,7 +20,8 @@
 namespace valvediag::cli {
 
 void check_report_writable(const std::string& path) {
-  if (path.empty()) throw UsageError("--out: give the HTML file to write");
+  if (path.empty())
+    throw UsageError("--out FILE: give the HTML file to write, e.g. --out report.html");
   if (std::filesystem::is_directory(path))
     throw UsageError("--out " + path + " is a directory: give a file name, e.g. report.html");
   try {
@@ -72,8 +74,9 @@ void add_report(CLI::App& app, int& exit_code) {
     std::string model, out, gnuplot;
     double validate = 0.3;
     double timeout = 30.0;
-    bool no_diagnose = false, no_history = false, no_plots = false, keep_lead_in = false;
+    bool no_diagnose = false, no_plots = false, keep_lead_in = false;
     std::string op_range;
+    HistoryOptions hist;
   };
   auto a = std::make_shared<Args>();
   add_data_options(cmd, a->data);
@@ -83,7 +86,8 @@ void add_report(CLI::App& app, int& exit_code) {
                   "the model to fit and show, e.g. preisach, stiction+saturation (default: the "
                   "last model of the data's ladder, else preisach)")
       ->group(g);
-  cmd->add_option("--out", a->out, "the HTML file to write (default: DATA.report.html)")->group(g);
+  // Never a default beside the data: a shared folder of exports is not ours to write in.
+  cmd->add_option("--out", a->out, "the HTML file to write (required)")->group(g);
   cmd->add_option("--validate", a->validate, "fraction of the record held out for validation")
       ->group(g)
       ->capture_default_str();
@@ -95,9 +99,7 @@ void add_report(CLI::App& app, int& exit_code) {
                 "fit and diagnose the whole record even when OP holds still for most of it "
                 "before the loop moves (by default that lead-in is left out, as in diagnose)")
       ->group(g);
-  cmd->add_flag("--no-history", a->no_history,
-                "do not add this fit to the model history next to the data")
-      ->group(g);
+  add_history_options(cmd, a->hist, g);
   cmd->add_flag("--no-plots", a->no_plots, "write the page without plots (gnuplot not needed)")
       ->group(g);
   cmd->add_option("--gnuplot", a->gnuplot,
@@ -114,7 +116,7 @@ void add_report(CLI::App& app, int& exit_code) {
     if (!a->model.empty()) spec = parse_model_spec(a->model);  // bad names: exit status 2
     const OpRange range = parse_op_range(a->op_range);
     const std::string name = data_name(a->data);
-    const std::string out = a->out.empty() ? name + ".report.html" : a->out;
+    const std::string& out = a->out;
     ReportOptions ro;
     ro.gnuplot.program = a->gnuplot;
     ro.gnuplot.timeout_s = a->timeout;
@@ -139,8 +141,8 @@ void add_report(CLI::App& app, int& exit_code) {
     const LoopData& d = part.data;
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
-    const std::string history = history_path_for(name);
-    auto ladder = load_history(history);
+    std::string history = history_file(a->hist, a->data, whole);
+    auto ladder = read_history_or_warn(history);
     if (!spec) {
       spec = parse_model_spec(ladder.empty() ? "preisach:general" : ladder.back().model);
       std::cout << "note: model " << to_string(*spec)
@@ -203,12 +205,10 @@ void add_report(CLI::App& app, int& exit_code) {
       exit_code = kNoModel;
       return;
     }
-    if (!a->no_history && (ladder.empty() || ladder.back().model != to_string(fit.spec))) {
-      std::string why;
-      if (try_append_history(history, {history_entry(fit, "report")}, why))
-        ladder = load_history(history);
-      else
-        std::cerr << "warning: " << why << "; the report is written without it\n";
+    if (!a->hist.off && (ladder.empty() || ladder.back().model != to_string(fit.spec))) {
+      const HistoryEntry entry = history_entry(fit, "report");
+      record_history(history, {entry}, "the report");
+      ladder.push_back(entry);  // on the page, written or not
     }
     ReportContent c;
     c.data = &d;

@@ -644,7 +644,7 @@ PlotJob ladder_plot(const ReportContent& c) {
           << " using 1:4 with linespoints pt 5 ps 0.8 lw 1.5 lc rgb '#d62728' title "
              "'validation'\n";
   job.caption =
-      "Every fit of this data, in order (the model history next to the data). "
+      "Every fit of this data, in order (its model history). "
       "Fitness below -100 % is cut off.";
   job.script = p.script();
   return job;

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +15,40 @@ namespace valvediag {
 
 std::string history_path_for(const std::string& data_path) {
   return data_path + ".history.json";
+}
+
+std::string history_state_dir(std::string& why) {
+  namespace fs = std::filesystem;
+  const char* xdg = std::getenv("XDG_STATE_HOME");
+  if (xdg && *xdg && fs::path(xdg).is_absolute()) return (fs::path(xdg) / "valvediag").string();
+  const char* home = std::getenv("HOME");
+  if (home && *home && fs::path(home).is_absolute())
+    return (fs::path(home) / ".local" / "state" / "valvediag").string();
+  why =
+      "no state directory for the model history: neither XDG_STATE_HOME nor HOME is set to an "
+      "absolute path; set one, or give --history FILE";
+  return "";
+}
+
+std::uint64_t history_key(const LoopData& d, const std::string& reading) {
+  std::uint64_t h = 14695981039346656037ull;  // FNV-1a, 64 bit
+  auto bytes = [&h](const void* p, std::size_t n) {
+    const auto* c = static_cast<const unsigned char*>(p);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ c[i]) * 1099511628211ull;
+  };
+  for (const auto* v : {&d.t, &d.op, &d.pv, &d.sp, &d.mv}) {
+    const std::uint64_t n = v->size();  // lengths too: columns cannot trade values
+    bytes(&n, sizeof n);
+    bytes(v->data(), v->size() * sizeof(double));
+  }
+  bytes(reading.data(), reading.size());
+  return h;
+}
+
+std::string history_file_in(const std::string& state_dir, std::uint64_t key) {
+  char name[24];
+  std::snprintf(name, sizeof name, "%016llx.json", static_cast<unsigned long long>(key));
+  return (std::filesystem::path(state_dir) / "history" / name).string();
 }
 
 namespace {
@@ -69,7 +104,7 @@ std::vector<HistoryEntry> load_history(const std::string& path) {
   return out;
 }
 
-void append_history(const std::string& path, const std::vector<HistoryEntry>& entries) {
+std::size_t append_history(const std::string& path, const std::vector<HistoryEntry>& entries) {
   auto all = load_history(path);
   all.insert(all.end(), entries.begin(), entries.end());
   nlohmann::json j;
@@ -89,13 +124,25 @@ void append_history(const std::string& path, const std::vector<HistoryEntry>& en
                             {"command", h.command},
                             {"time", h.time}});
   }
+  const auto dir = std::filesystem::path(path).parent_path();
+  if (!dir.empty() && !std::filesystem::is_directory(dir)) {
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec)
+      throw std::runtime_error("cannot write the model history " + path + ": cannot create " +
+                               dir.string() + " (" + ec.message() + ")");
+    // The history says which data the user looked at: theirs alone.
+    std::filesystem::permissions(dir, std::filesystem::perms::owner_all, ec);
+  }
   write_file_atomically(path, j.dump(2) + "\n");
+  return all.size();
 }
 
 bool try_append_history(const std::string& path, const std::vector<HistoryEntry>& entries,
-                        std::string& why) {
+                        std::string& why, std::size_t* total) {
   try {
-    append_history(path, entries);
+    const std::size_t n = append_history(path, entries);
+    if (total) *total = n;
     return true;
   } catch (const std::exception& e) {
     why = e.what();

@@ -265,8 +265,9 @@ TEST_CASE("simulate lists and writes scenarios; bad names are user errors") {
 
 TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladder") {
   REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --out " + tmp("diag.csv")).status == 0);
-  std::remove((tmp("diag.csv") + ".history.json").c_str());
-  auto r = run("diagnose " + tmp("diag.csv") + " --auto --json " + tmp("diag.json"));
+  const std::string hist = " --history " + tmp("diag.history.json");
+  std::remove(tmp("diag.history.json").c_str());
+  auto r = run("diagnose " + tmp("diag.csv") + hist + " --auto --json " + tmp("diag.json"));
   REQUIRE(r.status == 0);
   CHECK(r.out.find("verdict:   stiction") != std::string::npos);
   std::ifstream f(tmp("diag.json"));
@@ -323,7 +324,7 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   for (const auto& x : j["findings"])
     for (const char* k : {"effect", "score", "validation_gain_percent", "where", "explanation"})
       CHECK_MESSAGE(x.contains(k), k);
-  auto l = run("ladder " + tmp("diag.csv"));
+  auto l = run("ladder " + tmp("diag.csv") + hist);
   CHECK(l.status == 0);
   CHECK(l.out.find("linear") != std::string::npos);
   CHECK(l.out.find("stiction.fs") != std::string::npos);
@@ -331,7 +332,7 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   auto bad = run("diagnose " + tmp("diag.csv") + " --model stiction+wobble");
   CHECK(bad.status == 2);
   CHECK(bad.out.find("deadband") != std::string::npos);
-  auto none = run("ladder " + tmp("nothing-here.csv"));
+  auto none = run("ladder " + tmp("diag.csv") + " --history " + tmp("nothing-here.json"));
   CHECK(none.status == 2);
   CHECK(none.out.find("diagnose") != std::string::npos);
 }
@@ -425,41 +426,41 @@ TEST_CASE("diagnose reads friction from a recorded valve position") {
 }
 
 TEST_CASE("a model history that cannot be written is a warning: the result stands") {
-  // A read-only data folder (a share, ../shared in CI): stand-in, the history's name is taken by
-  // a folder, so the history cannot be written there (root ignores permissions).
-  const std::string csv = tmp("ro.csv");
+  // The history's name is taken by a folder, so it cannot be written (root ignores permissions;
+  // test_history.cpp has the junk file and the unusable state directory).
+  const std::string csv = tmp("ro.csv"), hist = tmp("ro.history.json");
   REQUIRE(run("simulate --scenario paper-ex1-linear --samples 600 --out " + csv).status == 0);
-  fs::remove_all(csv + ".history.json");
-  fs::create_directories(csv + ".history.json");
-  auto r = run("fit " + csv + " --model linear");
+  fs::remove_all(hist);
+  fs::create_directories(hist);
+  auto r = run("fit " + csv + " --model linear --history " + hist);
   CHECK(r.status == 0);
   CHECK(r.out.find("fitness:") != std::string::npos);
-  CHECK(r.out.find("warning: cannot write the model history " + csv + ".history.json") !=
-        std::string::npos);
+  CHECK(r.out.find("warning: cannot write the model history " + hist) != std::string::npos);
   CHECK(r.out.find("--no-history") != std::string::npos);
-  CHECK(fs::is_empty(csv + ".history.json"));  // not removed, nothing written in it
-  fs::remove(csv + ".history.json");
+  CHECK(fs::is_empty(hist));  // not removed, nothing written in it
+  fs::remove(hist);
   // Nor is a planted link at the old temporary name written through.
   std::ofstream(tmp("victim.txt")) << "keep";
-  fs::create_symlink(tmp("victim.txt"), csv + ".history.json.tmp");
-  CHECK(run("fit " + csv + " --model linear").status == 0);
+  fs::create_symlink(tmp("victim.txt"), hist + ".tmp");
+  CHECK(run("fit " + csv + " --model linear --history " + hist).status == 0);
   std::ifstream victim(tmp("victim.txt"));
   std::string kept;
   victim >> kept;
   CHECK(kept == "keep");
-  CHECK(fs::is_regular_file(csv + ".history.json"));
-  fs::remove(csv + ".history.json.tmp");
-  fs::remove(csv + ".history.json");
+  CHECK(fs::is_regular_file(hist));
+  fs::remove(hist + ".tmp");
+  fs::remove(hist);
 }
 
 TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   REQUIRE(run("simulate --scenario deadband --seed 2 --out " + tmp("db.csv")).status == 0);
-  std::remove((tmp("db.csv") + ".history.json").c_str());
-  auto lin =
-      run("fit " + tmp("db.csv") + " --model linear --validate 0.3 --json " + tmp("lin.json"));
+  const std::string hist = " --history " + tmp("db.history.json");  // a fresh ladder
+  std::remove(tmp("db.history.json").c_str());
+  auto lin = run("fit " + tmp("db.csv") + hist + " --model linear --validate 0.3 --json " +
+                 tmp("lin.json"));
   REQUIRE(lin.status == 0);
-  auto add =
-      run("fit " + tmp("db.csv") + " --add deadband --validate 0.3 --json " + tmp("db.json"));
+  auto add = run("fit " + tmp("db.csv") + hist + " --add deadband --validate 0.3 --json " +
+                 tmp("db.json"));
   REQUIRE(add.status == 0);
   CHECK(add.out.find("starting from the last model of this data: linear") != std::string::npos);
   std::ifstream f1(tmp("lin.json")), f2(tmp("db.json"));
@@ -480,14 +481,14 @@ TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   // The error falls: the effect that is really there raises validation fitness clearly.
   CHECK(j2["validation_fitness_percent"].get<double>() >
         j1["validation_fitness_percent"].get<double>() + 10.0);
-  auto rem = run("fit " + tmp("db.csv") + " --remove deadband --validate 0.3");
+  auto rem = run("fit " + tmp("db.csv") + hist + " --remove deadband --validate 0.3");
   CHECK(rem.status == 0);
   CHECK(rem.out.find("model:     linear") != std::string::npos);
-  auto l = run("ladder " + tmp("db.csv"));
+  auto l = run("ladder " + tmp("db.csv") + hist);
   CHECK(l.status == 0);
   CHECK(l.out.find("deadband.d") != std::string::npos);
-  CHECK(run("fit " + tmp("db.csv") + " --remove stiction").status == 2);  // not in the model
-  CHECK(run("fit " + tmp("db.csv") + " --add wobble").status == 2);
+  CHECK(run("fit " + tmp("db.csv") + hist + " --remove stiction").status == 2);  // not in the model
+  CHECK(run("fit " + tmp("db.csv") + hist + " --add wobble").status == 2);
 }
 
 TEST_CASE("fit --add preisach replaces stiction or deadband and says so") {

@@ -19,13 +19,23 @@
 
 namespace valvediag::test {
 
-// Starts `args` (args[0]: the program) with stdout and stderr into `out`.
-inline pid_t spawn(const std::vector<std::string>& args, const std::filesystem::path& out) {
+// Starts `args` (args[0]: the program) with stdout and stderr into `out`; `env` changes the
+// child's environment ("NAME=VALUE" sets, "-NAME" removes), `cwd` its working folder.
+inline pid_t spawn(const std::vector<std::string>& args, const std::filesystem::path& out,
+                   const std::vector<std::string>& env = {}, const std::string& cwd = "") {
   const pid_t pid = ::fork();
   if (pid == 0) {
     const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     ::dup2(fd, 1);
     ::dup2(fd, 2);
+    for (const auto& e : env) {  // the test programs are single-threaded: setenv is safe here
+      const auto eq = e.find('=');
+      if (e.starts_with('-'))
+        ::unsetenv(e.c_str() + 1);
+      else if (eq != std::string::npos)
+        ::setenv(e.substr(0, eq).c_str(), e.c_str() + eq + 1, 1);
+    }
+    if (!cwd.empty() && ::chdir(cwd.c_str()) != 0) ::_exit(126);
     std::vector<char*> argv;
     for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
     argv.push_back(nullptr);
@@ -56,9 +66,10 @@ struct CliResult {
 };
 
 // `bin` with `args`; the output (stdout and stderr together) goes through a numbered file in
-// `tmp`, removed once read.
+// `tmp`, removed once read. `env`, `cwd`: as for spawn().
 inline CliResult run_cli(const std::string& bin, const std::vector<std::string>& args,
-                         const std::filesystem::path& tmp, double limit_s = 60.0) {
+                         const std::filesystem::path& tmp, double limit_s = 60.0,
+                         const std::vector<std::string>& env = {}, const std::string& cwd = "") {
   static int n = 0;
   // The process id keeps test programs that ctest runs side by side (one binary, several
   // entries) off each other's files.
@@ -66,7 +77,7 @@ inline CliResult run_cli(const std::string& bin, const std::vector<std::string>&
       tmp / ("cli_out_" + std::to_string(::getpid()) + "_" + std::to_string(++n) + ".txt");
   std::vector<std::string> full{bin};
   full.insert(full.end(), args.begin(), args.end());
-  const int st = wait_child(spawn(full, out), limit_s);
+  const int st = wait_child(spawn(full, out, env, cwd), limit_s);
   std::stringstream ss;
   {
     std::ifstream f(out);

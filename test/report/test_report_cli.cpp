@@ -47,7 +47,8 @@ std::string slurp(const std::string& path) {
   return s.str();
 }
 
-// A sticky loop (the paper's Example 1, 1500 samples) with no model history yet.
+// A sticky loop (the paper's Example 1, 1500 samples) with no model history yet in the file that
+// --history CSV.history.json names.
 std::string sticky_loop(const std::string& name) {
   const std::string csv = tmp(name);
   const Run s = run("simulate --scenario paper-ex1 --seed 1 --samples 1500 --out " + csv);
@@ -61,7 +62,8 @@ std::string sticky_loop(const std::string& name) {
 TEST_CASE("report on a simulated sticky loop: one self-contained page with every plot") {
   const std::string csv = sticky_loop("sticky.csv"), out = tmp("sticky.html");
   std::filesystem::remove(out);
-  const Run r = run("report " + csv + " --model preisach:general --out " + out);
+  const std::string hist = " --history " + csv + ".history.json";
+  const Run r = run("report " + csv + hist + " --model preisach:general --out " + out);
   INFO(r.out);
   REQUIRE(r.status == 0);
   CHECK(r.out.find("wrote " + out) != std::string::npos);
@@ -82,7 +84,7 @@ TEST_CASE("report on a simulated sticky loop: one self-contained page with every
   CHECK(h.find("% on validation data") != std::string::npos);
   // The fit entered the model history; the next report takes the ladder's last model.
   CHECK(std::filesystem::exists(csv + ".history.json"));
-  const Run again = run("report " + csv + " --no-diagnose --out " + tmp("again.html"));
+  const Run again = run("report " + csv + hist + " --no-diagnose --out " + tmp("again.html"));
   INFO(again.out);
   CHECK(again.status == 0);
   CHECK(again.out.find("model preisach:general (the last model of this data's ladder)") !=
@@ -108,6 +110,12 @@ TEST_CASE("report: user errors exit 2 with a clear message and leave no file") {
           std::string::npos);
     const Run d = run("report " + csv + " --out " + std::string(VALVEDIAG_TMP));
     CHECK(d.status == 2);
+  }
+  SUBCASE("no --out: no page beside the data, nor anywhere") {
+    const Run r = run("report " + csv + " --no-plots --no-diagnose");
+    CHECK(r.status == 2);
+    CHECK(r.out.find("--out FILE: give the HTML file to write") != std::string::npos);
+    CHECK(!std::filesystem::exists(csv + ".report.html"));
   }
   SUBCASE("no data, or a missing file") {
     CHECK(run("report --out " + tmp("x.html")).status == 2);
@@ -153,14 +161,16 @@ TEST_CASE("demo --offline diagnoses and writes the report, and says where it is"
   const std::string report = dir + "/report.html";
   CHECK(r.out.find("verdict:") != std::string::npos);
   CHECK(r.out.find("report (HTML)   " + report) != std::string::npos);
-  CHECK(r.out.find("model history   " + dir + "/fic101.csv.history.json") != std::string::npos);
+  CHECK(r.out.find("model history   " + dir + "/fic101.csv.history.json   (valvediag ladder " +
+                   dir + "/fic101.csv --history " + dir + "/fic101.csv.history.json)") !=
+        std::string::npos);
   const std::string h = slurp(report);
   check_self_contained(h);
   for (const char* id : {"plot-fit", "plot-preisach", "plot-ladder"})
     CHECK_MESSAGE(has_plot(h, id), id);
   CHECK(h.find("id=\"findings\"") != std::string::npos);
   // The ladder: linear (diagnosed) and the full-grid Preisach fit.
-  const Run l = run("ladder " + dir + "/fic101.csv");
+  const Run l = run("ladder " + dir + "/fic101.csv --history " + dir + "/fic101.csv.history.json");
   CHECK(l.status == 0);
   CHECK(l.out.find("linear") != std::string::npos);
   CHECK(l.out.find("preisach") != std::string::npos);

@@ -175,9 +175,12 @@ TEST_CASE("one verdict: a model history on disk does not change report's verdict
           doctest::skip(kSanitized)) {
   const std::string csv = simulated("characteristic", 1);
   const std::string page = (kTmp / "one-history.html").string();
+  const std::string hist = csv + ".history.json";  // --history: a fresh ladder every run
+  fs::remove(hist);
   auto report = [&](const std::string& model_note) {
     // --no-history: the report reads the history, it does not add to it here.
-    const test::CliResult r = run({"report", csv, "--no-plots", "--no-history", "--out", page});
+    const test::CliResult r =
+        run({"report", csv, "--no-plots", "--history", hist, "--no-history", "--out", page});
     INFO(r.out);
     REQUIRE(r.status == 0);
     CHECK(r.out.find(model_note) != std::string::npos);
@@ -187,17 +190,17 @@ TEST_CASE("one verdict: a model history on disk does not change report's verdict
   const std::string first =
       report("note: model preisach:general (no model history for this data yet)");
   REQUIRE(!first.empty());
-  REQUIRE(!fs::exists(csv + ".history.json"));
+  REQUIRE(!fs::exists(hist));
 
-  const test::CliResult fit = run({"fit", csv, "--model", "preisach"});
+  const test::CliResult fit = run({"fit", csv, "--model", "preisach", "--history", hist});
   REQUIRE(fit.status == 0);
-  REQUIRE(fs::exists(csv + ".history.json"));
+  REQUIRE(fs::exists(hist));
   CHECK(report("note: model preisach (the last model of this data's ladder)") == first);
 
-  const test::CliResult climb = run({"diagnose", csv, "--auto"});
+  const test::CliResult climb = run({"diagnose", csv, "--auto", "--history", hist});
   INFO(climb.out);
   REQUIRE(climb.status == 0);
-  const std::string top = read_json(csv + ".history.json")["entries"].back()["model"];
+  const std::string top = read_json(hist)["entries"].back()["model"];
   CHECK(report("note: model " + top + " (the last model of this data's ladder)") == first);
   // That model is where the verdict's climb ended: the page shows that climb, not a rerun.
   CHECK(read_text(page).find("valvediag diagnose " + csv + " --auto") != std::string::npos);
