@@ -24,4 +24,8 @@ namespace valvediag {
 
 std::string verdict(const Diagnosis& d);
 
+// What a verdict word means for the valve and what an engineer does about it, in one or two
+// sentences (the sweep's page, the README's table); empty for a word that is not a verdict.
+std::string verdict_advice(const std::string& verdict);
+
 }  // namespace valvediag

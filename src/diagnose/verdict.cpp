@@ -39,4 +39,25 @@ std::string verdict(const Diagnosis& d) {
   return from_model == "stiction" || from_model == "deadband" ? "no-valve-problem" : from_model;
 }
 
+std::string verdict_advice(const std::string& verdict) {
+  if (verdict == "stiction")
+    return "The valve sticks: it holds while OP moves, then jumps. Plan maintenance (packing, "
+           "actuator, positioner) and confirm with a valve travel test; less integral action "
+           "calms the cycle meanwhile.";
+  if (verdict == "deadband")
+    return "Play in the linkage or positioner: after a reversal OP must travel a band before the "
+           "valve follows, without a jump. Check the linkage and the positioner.";
+  if (verdict == "other-nonlinearity")
+    return "Not sticky, but the valve's response is not linear: it reaches a travel limit or its "
+           "flow characteristic curves. Check the sizing and the characteristic.";
+  if (verdict == "no-valve-problem")
+    return "Nothing in the data points at the valve. If the loop performs poorly, look at the "
+           "tuning, the process and its loads.";
+  if (verdict == "not-enough-data")
+    return "The record cannot decide: too short, too flat or too few OP reversals. Record longer, "
+           "or while the loop moves (set-point changes); the note says what was missing.";
+  if (verdict == "error") return "The record could not be read or analysed; the note says why.";
+  return "";
+}
+
 }  // namespace valvediag

@@ -10,6 +10,7 @@
 #include "number_format.hpp"
 #include "valvediag/diagnosis_report.hpp"
 #include "valvediag/html_report.hpp"
+#include "valvediag/verdict.hpp"
 
 namespace valvediag {
 
@@ -280,12 +281,27 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
        "td,th{border:1px solid #bbb;padding:.25em .5em;text-align:right}"
        "td.l,th.l{text-align:left}tr.stiction{background:#fdd}tr.deadband{background:#fed}"
        "tr.other-nonlinearity{background:#ffe}tr.error,tr.not-enough-data{color:#777}"
+       "table.counts{margin-bottom:1em;max-width:60em}table.counts td.l{white-space:normal}"
+       "div.wide{overflow-x:auto;max-width:100%}div.wide table{font-size:.9em}"
        "</style></head><body>\n";
   o << "<h1>Valve diagnostic sweep</h1>\n<p>" << html_escape(info.source) << "; started "
     << html_escape(info.started_utc) << ", finished " << html_escape(info.finished_utc);
   if (!info.shard.empty()) o << "; shard " << html_escape(info.shard);
   o << "; " << loops.size() << " loops, ranked by severity.</p>\n";
-  o << "<table><tr><th>rank</th><th class=\"l\">loop</th><th class=\"l\">verdict</th>"
+  // How many of each verdict, and what each asks of the engineer.
+  std::map<std::string, int> counts;
+  for (const auto& a : loops) ++counts[a.verdict];
+  o << "<table class=\"counts\"><tr><th class=\"l\">verdict</th><th>loops</th>"
+       "<th class=\"l\">what it means, what to do</th></tr>\n";
+  for (const char* v : {"stiction", "deadband", "other-nonlinearity", "no-valve-problem",
+                        "not-enough-data", "error"})
+    if (counts.count(v))
+      o << "<tr class=\"" << v << "\"><td class=\"l\">" << v << "</td><td>" << counts[v]
+        << "</td><td class=\"l\">" << html_escape(verdict_advice(v)) << "</td></tr>\n";
+  o << "</table>\n";
+  // Wide: it scrolls inside its box rather than widening the page.
+  o << "<div class=\"wide\"><table><tr><th>rank</th><th class=\"l\">loop</th><th "
+       "class=\"l\">verdict</th>"
        "<th>stiction % travel</th><th>slip jump %</th><th class=\"l\">model</th><th>fitness "
        "%</th><th>validation %</th><th class=\"l\">missing first</th><th>oscillation period "
        "s</th><th>OP reversals/h</th><th>OP travel %/h</th><th>time at limits %</th>"
@@ -312,7 +328,7 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
       << html_escape(a.error.empty() ? (a.verdict == "not-enough-data" ? a.reason : "") : a.error)
       << "</td></tr>\n";
   }
-  o << "</table>\n</body></html>\n";
+  o << "</table></div>\n</body></html>\n";
   return o.str();
 }
 

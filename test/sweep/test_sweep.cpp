@@ -28,6 +28,7 @@
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sweep_report.hpp"
 #include "valvediag/sweep_store.hpp"
+#include "valvediag/verdict.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;
@@ -326,6 +327,17 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(csv.find("1,FIC101,stiction,") != std::string::npos);
   const std::string html = sweep_html(SweepInfo{}, v, {"reports/FIC101.html"});
   CHECK(html.find("<a href=\"reports/FIC101.html\">FIC101</a>") != std::string::npos);
+  // The page counts each verdict and says what it asks of the engineer; no row for a verdict
+  // no loop has.
+  CHECK(html.find("<td class=\"l\">stiction</td><td>2</td>") != std::string::npos);
+  CHECK(html.find("<td class=\"l\">error</td><td>1</td>") != std::string::npos);
+  CHECK(html.find("<td class=\"l\">deadband</td>") == std::string::npos);
+  CHECK(html.find(verdict_advice("stiction")) != std::string::npos);
+  CHECK(html.find("<div class=\"wide\">") != std::string::npos);
+  for (const char* v : {"stiction", "deadband", "other-nonlinearity", "no-valve-problem",
+                        "not-enough-data", "error"})
+    CHECK_MESSAGE(!verdict_advice(v).empty(), v);
+  CHECK(verdict_advice("wobble").empty());
 }
 
 TEST_CASE(
