@@ -36,8 +36,22 @@ struct SampleRow {
   std::array<PointValue, kPointCount> values;
 };
 
-// The SQLite file: schema, batched inserts, and reading a loop back. Throws std::runtime_error
-// naming the file and what to do on any SQLite failure.
+// Ticks [first_tick, last_tick] of a loop without good OP and PV, with the first problem seen.
+struct GapRow {
+  std::int64_t loop_id = 0, first_tick = 0, last_tick = 0;
+  std::string reason;
+};
+
+// Another connection holds SQLite's write lock longer than the busy timeout. SQLite cannot say
+// which process holds it; the message names the file and says so. Nothing was written.
+class DatabaseBusyError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// The SQLite file: schema, batched inserts, and reading a loop back. Throws DatabaseBusyError
+// when another process holds the write lock past the busy timeout, std::runtime_error naming the
+// file and what to do on any other SQLite failure.
 class RecordingDb {
  public:
   explicit RecordingDb(const std::string& path, bool create = true);
@@ -48,11 +62,13 @@ class RecordingDb {
   std::int64_t begin_run(const std::string& config_file);
   void end_run(std::int64_t run, const std::string& status);
   std::int64_t add_loop(std::int64_t run, const LoopConfigEntry& loop);
-  // All rows in one transaction.
-  void insert(const std::vector<SampleRow>& rows);
+  // All rows and gaps in one transaction: stored together or (busy, error) not at all.
+  void insert(const std::vector<SampleRow>& rows, const std::vector<GapRow>& gaps = {});
   void add_gap(std::int64_t loop_id, std::int64_t first_tick, std::int64_t last_tick,
                const std::string& reason);
   std::string integrity_check();  // "ok" when intact
+  // How long a statement waits for another connection's write lock before DatabaseBusyError.
+  void set_busy_timeout(double seconds);
   const std::string& path() const { return path_; }
   struct Impl;
 
@@ -99,6 +115,10 @@ struct RecorderOptions {
   // caller put the polls between the steps of a simulated PLC.
   std::optional<std::chrono::steady_clock::time_point> start;
   double status_interval_s = 1.0;
+  // While another process holds the database's write lock, samples wait in memory (about
+  // busy_limit_s of rows at most) and are stored once it is released. Designed for locks of up to
+  // a minute; a longer one stops the run with an error saying how many samples were not stored.
+  double busy_limit_s = 90.0;
 };
 
 struct LoopCounts {
@@ -117,6 +137,12 @@ struct RecorderStatus {
   std::vector<LoopCounts> loops;
   std::vector<std::pair<std::string, BusStats>> buses;
   std::string last_error;
+  // Database busy (another process holding SQLite's write lock): rows waiting in memory.
+  std::uint64_t waiting = 0, waiting_peak = 0;  // rows not yet stored while it was busy
+  double busy_s = 0.0;                          // busy this long now (0: not busy)
+  double busy_longest_s = 0.0;
+  std::uint64_t busy_times = 0;
+  std::string busy_message;  // the last one: the file, and that SQLite cannot name the process
   bool errors() const { return bad_rows > 0 || missed > 0; }
 };
 
