@@ -61,6 +61,10 @@ class RecordingDb {
 
   std::int64_t begin_run(const std::string& config_file);
   void end_run(std::int64_t run, const std::string& status);
+  // Marks `interrupted` the runs left `recording` by a recorder that was killed or aborted;
+  // returns their ids. Call only while holding the database's RecorderLock (recorder_lock.hpp):
+  // then no run is being recorded.
+  std::vector<std::int64_t> mark_interrupted_runs();
   std::int64_t add_loop(std::int64_t run, const LoopConfigEntry& loop);
   // All rows and gaps in one transaction: stored together or (busy, error) not at all.
   void insert(const std::vector<SampleRow>& rows, const std::vector<GapRow>& gaps = {});
@@ -151,8 +155,9 @@ using BusFactory =
 
 class Recorder {
  public:
-  // Checks the loop selection against the site, builds the buses through `factory`, then opens
-  // (creates) the database; throws std::invalid_argument for an unknown loop name,
+  // Checks the loop selection against the site, builds the buses through `factory`, takes the
+  // database's recorder lock, then opens (creates) the database; throws std::invalid_argument
+  // for an unknown loop name, DatabaseInUseError when another recorder holds the lock,
   // std::runtime_error when a bus cannot exist (no SocketCAN) or the database cannot be opened.
   // Nothing is sent on any bus before run().
   Recorder(SiteConfig site, RecorderOptions options, BusFactory factory);
@@ -162,6 +167,8 @@ class Recorder {
   RecorderStatus run(const std::atomic<bool>& stop,
                      const std::function<void(const RecorderStatus&)>& on_status = {});
   std::int64_t run_id() const;
+  // Runs a killed or aborted recorder had left `recording`, marked `interrupted` on opening.
+  const std::vector<std::int64_t>& interrupted_runs() const;
 
  private:
   struct Impl;

@@ -91,8 +91,9 @@ void add_record(CLI::App& app, int& exit_code) {
       "10m\n"
       "One row per sample tick per loop, with a quality flag per value (good, stale, comm-error, "
       "missed, invalid);\ngaps are marked, never filled. Ctrl-C stops cleanly. Exit status 0: no "
-      "errors; 4: recorded, with errors\n(see the summary); 2: bad config or options; 1: the "
-      "database failed (e.g. busy for over 90 s:\nsamples wait in memory while another "
+      "errors; 4: recorded, with errors\n(see the summary); 2: bad config or options, or the "
+      "database is being recorded by another\nrecorder (named; it holds DB.lock while it runs); "
+      "1: the database failed (e.g. busy for over 90 s:\nsamples wait in memory while another "
       "process holds its write lock). Only reads: no Modbus write\nfunction code, no CAN frame.");
   struct Args {
     std::string config, db, loops, duration;
@@ -123,6 +124,10 @@ void add_record(CLI::App& app, int& exit_code) {
     }
     Recorder& rec = *rec_ptr;
     const bool tty = ::isatty(2) != 0;
+    for (std::int64_t r : rec.interrupted_runs())
+      std::cerr << "note: run " << r << " in " << a->db
+                << " was left 'recording' by a recorder that did not end cleanly (killed, or "
+                   "stopped by an error): marked 'interrupted'\n";
     std::cerr << "recording into " << a->db << "; Ctrl-C stops\n";
     const RecorderStatus s = rec.run(stop, [&](const RecorderStatus& st) {
       if (a->quiet) return;

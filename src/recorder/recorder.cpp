@@ -10,6 +10,7 @@
 #include <optional>
 #include <thread>
 
+#include "valvediag/recorder_lock.hpp"
 #include "valvediag/text_stats.hpp"
 
 namespace valvediag {
@@ -47,7 +48,9 @@ struct Recorder::Impl {
   SiteConfig site;
   RecorderOptions opt;
   BusFactory factory;
+  std::unique_ptr<RecorderLock> lock;  // released after the database is closed
   std::unique_ptr<RecordingDb> db;
+  std::vector<std::int64_t> interrupted;
   std::int64_t run = 0;
   std::vector<PolledLoop> loops;
   std::vector<BusWorker> workers;
@@ -293,7 +296,10 @@ Recorder::Recorder(SiteConfig site, RecorderOptions options, BusFactory factory)
     w.bus = m.factory(b, on_bus);
     m.workers.push_back(std::move(w));
   }
+  m.lock = std::make_unique<RecorderLock>(m.opt.db_path);
   m.db = std::make_unique<RecordingDb>(m.opt.db_path);
+  // Holding the lock, no other recorder is running: a run still `recording` was cut short.
+  m.interrupted = m.db->mark_interrupted_runs();
 }
 
 Recorder::~Recorder() = default;
@@ -302,10 +308,15 @@ std::int64_t Recorder::run_id() const {
   return impl_->run;
 }
 
+const std::vector<std::int64_t>& Recorder::interrupted_runs() const {
+  return impl_->interrupted;
+}
+
 RecorderStatus Recorder::run(const std::atomic<bool>& stop,
                              const std::function<void(const RecorderStatus&)>& on_status) {
   Impl& m = *impl_;
   m.run = m.db->begin_run(m.site.file);
+  m.lock->set_run(m.run);
   for (auto& l : m.loops) l.db_id = m.db->add_loop(m.run, l.cfg);
 
   std::atomic<bool> done{false};

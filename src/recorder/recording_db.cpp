@@ -11,7 +11,9 @@
 #include <filesystem>
 #include <type_traits>
 
+#include "utc_now.hpp"
 #include "valvediag/recorder.hpp"
+#include "valvediag/recorder_lock.hpp"
 #include "valvediag/schema_versions.hpp"
 
 namespace valvediag {
@@ -56,14 +58,6 @@ void require_recording(sqlite3* db, const std::string& path) {
         path + ": holds no recordings; record one with valvediag record --db " + path);
 }
 
-std::string utc_now() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char b[32];
-  std::strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return b;
-}
 }  // namespace
 
 struct RecordingDb::Impl {
@@ -173,6 +167,25 @@ void RecordingDb::end_run(std::int64_t run, const std::string& status) {
   const int rc = sqlite3_step(s);
   sqlite3_finalize(s);
   if (rc != SQLITE_DONE) impl_->fail("closing the run", rc);
+}
+
+std::vector<std::int64_t> RecordingDb::mark_interrupted_runs() {
+  std::vector<std::int64_t> ids;
+  impl_->exec("BEGIN IMMEDIATE", "marking interrupted runs");
+  try {
+    sqlite3_stmt* s = impl_->prepare("SELECT id FROM runs WHERE status = 'recording' ORDER BY id");
+    int rc = 0;
+    while ((rc = sqlite3_step(s)) == SQLITE_ROW) ids.push_back(sqlite3_column_int64(s, 0));
+    sqlite3_finalize(s);
+    if (rc != SQLITE_DONE) impl_->fail("reading the runs", rc);
+    impl_->exec("UPDATE runs SET status = 'interrupted' WHERE status = 'recording'",
+                "marking interrupted runs");
+    impl_->exec("COMMIT", "marking interrupted runs");
+  } catch (...) {
+    impl_->rollback();
+    throw;
+  }
+  return ids;
 }
 
 std::int64_t RecordingDb::add_loop(std::int64_t run, const LoopConfigEntry& loop) {

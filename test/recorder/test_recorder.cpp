@@ -14,6 +14,7 @@
 #include "../common/sqlite_exec.hpp"
 #include "valvediag/bus_factory.hpp"
 #include "valvediag/recorder.hpp"
+#include "valvediag/recorder_lock.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sim_plc.hpp"
 
@@ -552,7 +553,7 @@ TEST_CASE("a write lock held past the recorder's limit stops it with a message, 
   o.duration_s = 30.0;
   o.loops = {"FIC101"};
   o.busy_limit_s = 1.5;  // the test's stand-in for the 90 s default
-  Recorder rec(fast_site(plc.port()), o, make_bus);
+  auto rec = std::make_unique<Recorder>(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false}, taken{false};
   std::thread locker;
   std::thread start_locker([&] {
@@ -560,7 +561,7 @@ TEST_CASE("a write lock held past the recorder's limit stops it with a message, 
       locker = hold_write_lock(db, 5.0, taken);
   });
   const auto t0 = std::chrono::steady_clock::now();
-  const std::string m = error_of([&] { rec.run(stop); });
+  const std::string m = error_of([&] { rec->run(stop); });
   const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   start_locker.join();
   if (locker.joinable()) locker.join();
@@ -574,5 +575,41 @@ TEST_CASE("a write lock held past the recorder's limit stops it with a message, 
   CHECK(m.find("sample(s) held in memory not stored") != std::string::npos);
   CHECK(m.find("not an error") == std::string::npos);
   CHECK(scalar(db, "SELECT count(*) FROM samples") >= 10);  // what was stored is kept
+  // The aborted run is `recording` no longer once the next recorder opens the database.
+  rec.reset();
+  Recorder next(fast_site(plc.port()), o, make_bus);
+  CHECK(next.interrupted_runs() == std::vector<std::int64_t>{1});
+  CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'interrupted' AND id = 1") == 1);
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE("a second recorder on a database is refused, naming the first; free once it ends") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string db = fresh_db("two");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 0.5;
+  o.loops = {"FIC101"};
+  const std::string lock = fs::weakly_canonical(db).string() + ".lock";
+  {
+    Recorder first(fast_site(plc.port()), o, make_bus);
+    CHECK(fs::exists(lock));
+    const std::string m = error_of([&] { Recorder second(fast_site(plc.port()), o, make_bus); });
+    CHECK(m.find(db + " is being recorded by valvediag pid " + std::to_string(::getpid()) +
+                 " on host ") != std::string::npos);
+    CHECK(m.find("a second recorder would poll the PLC twice: stop that one first") !=
+          std::string::npos);
+    CHECK_THROWS_AS(Recorder(fast_site(plc.port()), o, make_bus), DatabaseInUseError);
+    std::atomic<bool> stop{false};
+    first.run(stop);
+    CHECK(first.run_id() == 1);
+  }
+  CHECK(!fs::exists(lock));  // removed when the recorder ends
+  Recorder third(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false};
+  third.run(stop);
+  CHECK(third.run_id() == 2);
+  CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed'") == 2);
   CHECK(no_writes(plc));
 }
