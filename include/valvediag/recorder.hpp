@@ -87,9 +87,19 @@ class RecordingGapError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+// A run of a recording as readers see it.
+struct RunInfo {
+  std::int64_t id = 0;
+  std::string started_utc;
+  // completed, stopped, imported, interrupted; `recording` only while its recorder holds the
+  // database's lock (a run left so by a killed recorder reads as interrupted).
+  std::string status;
+};
 struct RecordedLoop {
   LoopData data;  // t from the run's start (s); sp when every sp is good
   std::int64_t run = 0;
+  RunInfo run_info;           // the run read
+  std::vector<RunInfo> runs;  // every run that recorded the loop, oldest first
   double sample_period = 0.0;
   std::size_t rows = 0;
   std::vector<std::string> notes;  // e.g. "sp left out: 3 ticks without a good sp"

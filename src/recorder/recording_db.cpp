@@ -272,6 +272,14 @@ std::string RecordingDb::integrity_check() {
 }
 
 namespace {
+std::string describe_runs(const std::vector<RunInfo>& runs) {
+  std::string s;
+  for (const RunInfo& r : runs)
+    s += (s.empty() ? "" : ", ") + std::to_string(r.id) + " (started " + r.started_utc + ", " +
+         r.status + ")";
+  return s;
+}
+
 std::string fmt_time(double t) {
   char b[32];
   std::snprintf(b, sizeof b, "%.6g", t);
@@ -304,6 +312,33 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     return s;
   };
   RecordedLoop out;
+  {
+    // The runs with this loop; `recording` without a recorder holding the lock for it was cut
+    // short (a reader opens read-only: the next recorder marks it).
+    const std::optional<LockHolder> holder = recorder_holding(db_path);
+    sqlite3_stmt* s = prepare(
+        "SELECT r.id, r.started_utc, r.status FROM runs r JOIN loops l ON l.run_id = r.id "
+        "WHERE l.name = ? ORDER BY r.id");
+    sqlite3_bind_text(s, 1, name.c_str(), -1, SQLITE_TRANSIENT);
+    while (sqlite3_step(s) == SQLITE_ROW) {
+      RunInfo r;
+      r.id = sqlite3_column_int64(s, 0);
+      auto text = [&](int i) {
+        const unsigned char* t = sqlite3_column_text(s, i);
+        return t ? std::string(reinterpret_cast<const char*>(t)) : std::string("?");
+      };
+      r.started_utc = text(1);
+      r.status = text(2);
+      if (r.status == "recording" && !(holder && (holder->run == r.id || holder->run == 0)))
+        r.status = "interrupted";
+      out.runs.push_back(r);
+    }
+    sqlite3_finalize(s);
+  }
+  if (run > 0 && !out.runs.empty() &&
+      std::none_of(out.runs.begin(), out.runs.end(), [&](const RunInfo& r) { return r.id == run; }))
+    throw std::runtime_error(db_path + ": no run " + std::to_string(run) + " with loop '" + name +
+                             "'; runs with it: " + describe_runs(out.runs) + " (--run ID)");
   std::int64_t loop_id = 0;
   bool has_sp = false, has_mv = false;
   {
@@ -496,6 +531,8 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     out.notes.push_back("the range has " + std::to_string(gaps.size()) + " gap(s) (" + list +
                         "); using the longest clean stretch, " + stretch);
   }
+  for (const RunInfo& r : out.runs)
+    if (r.id == out.run) out.run_info = r;
   out.rows = ticks.size();
   if (ticks.empty())
     throw std::runtime_error(db_path + ": loop " + name + " has no samples in the range");
