@@ -478,10 +478,13 @@ TEST_CASE("recordings from before table versions stay readable; newer tables are
 }
 
 namespace {
-// Another process's writer: holds SQLite's write lock on `db` for `hold_s` from when `taken` is
-// set (a thread of the test stands in for the other process: SQLite locks per connection).
+// Another process's writer: once the recorder has stored some samples, holds SQLite's write
+// lock on `db` for `hold_s`; `taken` says it got it (a thread of the test stands in for the other
+// process: SQLite locks per connection).
 std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bool>& taken) {
   return std::thread([db, hold_s, &taken] {
+    if (!test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 10.0))
+      return;
     sqlite3* c = nullptr;
     sqlite3_open(db.c_str(), &c);
     sqlite3_busy_timeout(c, 5000);
@@ -510,19 +513,14 @@ TEST_CASE("a write lock held 8 s by another process: samples wait in memory, not
   o.status_interval_s = 0.2;
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false}, taken{false};
-  std::thread locker;
-  std::thread start_locker([&] {
-    if (test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 10.0))
-      locker = hold_write_lock(db, 8.0, taken);
-  });
+  std::thread locker = hold_write_lock(db, 8.0, taken);
   std::uint64_t waiting_max = 0;
   double busy_max = 0.0;
   const RecorderStatus s = rec.run(stop, [&](const RecorderStatus& st) {
     waiting_max = std::max(waiting_max, st.waiting);
     busy_max = std::max(busy_max, st.busy_s);
   });
-  start_locker.join();
-  if (locker.joinable()) locker.join();
+  locker.join();
   REQUIRE(taken.load());
   MESSAGE("busy " << s.busy_longest_s << " s, up to " << s.waiting_peak << " rows in memory");
   CHECK(s.loops[0].rows == 220);
@@ -555,16 +553,11 @@ TEST_CASE("a write lock held past the recorder's limit stops it with a message, 
   o.busy_limit_s = 1.5;  // the test's stand-in for the 90 s default
   auto rec = std::make_unique<Recorder>(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false}, taken{false};
-  std::thread locker;
-  std::thread start_locker([&] {
-    if (test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 10.0))
-      locker = hold_write_lock(db, 5.0, taken);
-  });
+  std::thread locker = hold_write_lock(db, 5.0, taken);
   const auto t0 = std::chrono::steady_clock::now();
   const std::string m = error_of([&] { rec->run(stop); });
   const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  start_locker.join();
-  if (locker.joinable()) locker.join();
+  locker.join();
   REQUIRE(taken.load());
   INFO(m);
   CHECK(took < 10.0);  // stopped at the limit, not at the 30 s duration
