@@ -48,7 +48,7 @@ struct Recorder::Impl {
   SiteConfig site;
   RecorderOptions opt;
   BusFactory factory;
-  std::unique_ptr<RecorderLock> lock;  // released after the database is closed
+  std::unique_ptr<RecorderLock> db_lock;  // released after the database is closed
   std::unique_ptr<RecordingDb> db;
   std::vector<std::int64_t> interrupted;
   std::int64_t run = 0;
@@ -238,7 +238,10 @@ struct Recorder::Impl {
   bool commit(Clock::time_point now) {
     {
       std::lock_guard lock(mutex);
-      pending.insert(pending.end(), queue.begin(), queue.end());
+      if (pending.empty())
+        pending.swap(queue);  // the usual case: nothing waiting
+      else
+        pending.insert(pending.end(), queue.begin(), queue.end());
       queue.clear();
       pending_gaps.insert(pending_gaps.end(), closed_gaps.begin(), closed_gaps.end());
       closed_gaps.clear();
@@ -296,7 +299,7 @@ Recorder::Recorder(SiteConfig site, RecorderOptions options, BusFactory factory)
     w.bus = m.factory(b, on_bus);
     m.workers.push_back(std::move(w));
   }
-  m.lock = std::make_unique<RecorderLock>(m.opt.db_path);
+  m.db_lock = std::make_unique<RecorderLock>(m.opt.db_path);
   m.db = std::make_unique<RecordingDb>(m.opt.db_path);
   // Holding the lock, no other recorder is running: a run still `recording` was cut short.
   m.interrupted = m.db->mark_interrupted_runs();
@@ -316,7 +319,7 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
                              const std::function<void(const RecorderStatus&)>& on_status) {
   Impl& m = *impl_;
   m.run = m.db->begin_run(m.site.file);
-  m.lock->set_run(m.run);
+  m.db_lock->set_run(m.run);
   for (auto& l : m.loops) l.db_id = m.db->add_loop(m.run, l.cfg);
 
   std::atomic<bool> done{false};
