@@ -36,8 +36,22 @@ struct SampleRow {
   std::array<PointValue, kPointCount> values;
 };
 
-// The SQLite file: schema, batched inserts, and reading a loop back. Throws std::runtime_error
-// naming the file and what to do on any SQLite failure.
+// Ticks [first_tick, last_tick] of a loop without good OP and PV, with the first problem seen.
+struct GapRow {
+  std::int64_t loop_id = 0, first_tick = 0, last_tick = 0;
+  std::string reason;
+};
+
+// Another connection holds SQLite's write lock longer than the busy timeout. SQLite cannot say
+// which process holds it; the message names the file and says so. Nothing was written.
+class DatabaseBusyError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// The SQLite file: schema, batched inserts, and reading a loop back. Throws DatabaseBusyError
+// when another process holds the write lock past the busy timeout, std::runtime_error naming the
+// file and what to do on any other SQLite failure.
 class RecordingDb {
  public:
   explicit RecordingDb(const std::string& path, bool create = true);
@@ -47,12 +61,18 @@ class RecordingDb {
 
   std::int64_t begin_run(const std::string& config_file);
   void end_run(std::int64_t run, const std::string& status);
+  // Marks `interrupted` the runs left `recording` by a recorder that was killed or aborted;
+  // returns their ids. Call only while holding the database's RecorderLock (recorder_lock.hpp):
+  // then no run is being recorded.
+  std::vector<std::int64_t> mark_interrupted_runs();
   std::int64_t add_loop(std::int64_t run, const LoopConfigEntry& loop);
-  // All rows in one transaction.
-  void insert(const std::vector<SampleRow>& rows);
+  // All rows and gaps in one transaction: stored together or (busy, error) not at all.
+  void insert(const std::vector<SampleRow>& rows, const std::vector<GapRow>& gaps = {});
   void add_gap(std::int64_t loop_id, std::int64_t first_tick, std::int64_t last_tick,
                const std::string& reason);
   std::string integrity_check();  // "ok" when intact
+  // How long a statement waits for another connection's write lock before DatabaseBusyError.
+  void set_busy_timeout(double seconds);
   const std::string& path() const { return path_; }
   struct Impl;
 
@@ -67,9 +87,19 @@ class RecordingGapError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+// A run of a recording as readers see it.
+struct RunInfo {
+  std::int64_t id = 0;
+  std::string started_utc;
+  // completed, stopped, imported, interrupted; `recording` only while its recorder holds the
+  // database's lock (a run left so by a killed recorder reads as interrupted).
+  std::string status;
+};
 struct RecordedLoop {
   LoopData data;  // t from the run's start (s); sp when every sp is good
   std::int64_t run = 0;
+  RunInfo run_info;           // the run read
+  std::vector<RunInfo> runs;  // every run that recorded the loop, oldest first
   double sample_period = 0.0;
   std::size_t rows = 0;
   std::vector<std::string> notes;  // e.g. "sp left out: 3 ticks without a good sp"
@@ -99,6 +129,10 @@ struct RecorderOptions {
   // caller put the polls between the steps of a simulated PLC.
   std::optional<std::chrono::steady_clock::time_point> start;
   double status_interval_s = 1.0;
+  // While another process holds the database's write lock, samples wait in memory (about
+  // busy_limit_s of rows at most) and are stored once it is released. Designed for locks of up to
+  // a minute; a longer one stops the run with an error saying how many samples were not stored.
+  double busy_limit_s = 90.0;
 };
 
 struct LoopCounts {
@@ -117,6 +151,12 @@ struct RecorderStatus {
   std::vector<LoopCounts> loops;
   std::vector<std::pair<std::string, BusStats>> buses;
   std::string last_error;
+  // Database busy (another process holding SQLite's write lock): rows waiting in memory.
+  std::uint64_t waiting = 0, waiting_peak = 0;  // rows not yet stored while it was busy
+  double busy_s = 0.0;                          // busy this long now (0: not busy)
+  double busy_longest_s = 0.0;
+  std::uint64_t busy_times = 0;
+  std::string busy_message;  // the last one: the file, and that SQLite cannot name the process
   bool errors() const { return bad_rows > 0 || missed > 0; }
 };
 
@@ -125,8 +165,9 @@ using BusFactory =
 
 class Recorder {
  public:
-  // Checks the loop selection against the site, builds the buses through `factory`, then opens
-  // (creates) the database; throws std::invalid_argument for an unknown loop name,
+  // Checks the loop selection against the site, builds the buses through `factory`, takes the
+  // database's recorder lock, then opens (creates) the database; throws std::invalid_argument
+  // for an unknown loop name, DatabaseInUseError when another recorder holds the lock,
   // std::runtime_error when a bus cannot exist (no SocketCAN) or the database cannot be opened.
   // Nothing is sent on any bus before run().
   Recorder(SiteConfig site, RecorderOptions options, BusFactory factory);
@@ -136,6 +177,8 @@ class Recorder {
   RecorderStatus run(const std::atomic<bool>& stop,
                      const std::function<void(const RecorderStatus&)>& on_status = {});
   std::int64_t run_id() const;
+  // Runs a killed or aborted recorder had left `recording`, marked `interrupted` on opening.
+  const std::vector<std::int64_t>& interrupted_runs() const;
 
  private:
   struct Impl;

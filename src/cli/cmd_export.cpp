@@ -34,8 +34,11 @@ void add_export(CLI::App& app, int& exit_code) {
       "Examples:\n"
       "  valvediag export --db site.sqlite --loop FIC101 --out fic101.csv\n"
       "  valvediag export --db site.sqlite --loop FIC101 --from 600 --to 1800 --out part.csv\n"
+      "  valvediag export --db site.sqlite --loop FIC101 --run 2 --out run2.csv\n"
       "t is in seconds from the start of the recording. Ranges with gaps (ticks without good OP "
-      "and PV) are refused,\nnaming the gaps and the longest clean stretch.");
+      "and PV) are refused,\nnaming the gaps and the longest clean stretch. Which run is read is "
+      "said on stderr, with the loop's\nother runs; a --run that does not hold the loop lists "
+      "them.");
   struct Args {
     std::string db, loop, from, to, out;
     std::int64_t run = 0;
@@ -45,10 +48,21 @@ void add_export(CLI::App& app, int& exit_code) {
   cmd->add_option("--loop", a->loop, "loop name")->required();
   cmd->add_option("--from", a->from, "start, s from the recording's start");
   cmd->add_option("--to", a->to, "end, s from the recording's start");
-  cmd->add_option("--run", a->run, "recording run (default: the latest with this loop)");
+  cmd->add_option("--run", a->run,
+                  "recording run (default: the latest with this loop; stderr names the others)");
   cmd->add_option("--out", a->out, "CSV file to write")->required();
   cmd->callback([a, &exit_code] {
     const RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to, a->run);
+    // Several runs (two recorders once, or one run after another) must not be merged silently.
+    std::cerr << "export: loop " << a->loop << " of run " << r.run << " (started "
+              << r.run_info.started_utc << ", " << r.run_info.status
+              << (r.run_info.status == "recording" ? ": still being recorded, read so far" : "")
+              << ")";
+    std::string others;
+    for (const RunInfo& x : r.runs)
+      if (x.id != r.run) others += (others.empty() ? "" : ", ") + std::to_string(x.id);
+    if (!others.empty()) std::cerr << "; other runs with it: " << others << " (--run ID)";
+    std::cerr << "\n";
     for (const auto& n : r.notes) std::cout << "note: " << n << "\n";
     write_loop_csv(a->out, r.data);
     std::cout << "wrote " << a->out << ": " << r.data.size() << " samples of loop " << a->loop

@@ -28,6 +28,14 @@ std::string ms(double s) {
   return b;
 }
 
+// "1640 samples (0.2 MB)": rows held in memory while the database is busy.
+std::string in_memory(std::uint64_t rows) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%llu samples (%.1f MB)", static_cast<unsigned long long>(rows),
+                static_cast<double>(rows * sizeof(SampleRow)) / 1e6);
+  return b;
+}
+
 std::string status_line(const RecorderStatus& s) {
   std::ostringstream o;
   char t[32];
@@ -36,6 +44,11 @@ std::string status_line(const RecorderStatus& s) {
     << " stored), " << s.bad_rows << " with errors, " << s.missed << " missed, lateness p50 "
     << ms(s.lateness_p50_s) << " p99 " << ms(s.lateness_p99_s);
   for (const auto& [name, b] : s.buses) o << ", " << name << (b.connected ? " up" : " DOWN");
+  if (s.busy_s > 0) {
+    std::snprintf(t, sizeof t, "%.1f s", s.busy_s);
+    o << "; database busy " << t << " (locked by another process): " << in_memory(s.waiting)
+      << " wait in memory";
+  }
   return o.str();
 }
 
@@ -58,6 +71,12 @@ std::string recorder_summary(const RecorderStatus& s, const std::string& db, std
       << " garbled), " << b.disconnects << " disconnects, " << b.reconnects << " reconnects\n";
   o << "  lateness of the reads: p50 " << ms(s.lateness_p50_s) << ", p99 " << ms(s.lateness_p99_s)
     << ", max " << ms(s.lateness_max_s) << "\n";
+  if (s.busy_times > 0) {
+    std::snprintf(t, sizeof t, "%.1f", s.busy_longest_s);
+    o << "  database busy " << s.busy_times << " time(s), longest " << t
+      << " s (locked by another process; SQLite does not say which): up to "
+      << in_memory(s.waiting_peak) << " waited in memory, then were stored\n";
+  }
   if (!s.last_error.empty()) o << "  last error: " << s.last_error << "\n";
   return o.str();
 }
@@ -72,8 +91,10 @@ void add_record(CLI::App& app, int& exit_code) {
       "10m\n"
       "One row per sample tick per loop, with a quality flag per value (good, stale, comm-error, "
       "missed, invalid);\ngaps are marked, never filled. Ctrl-C stops cleanly. Exit status 0: no "
-      "errors; 4: recorded, with errors\n(see the summary); 2: bad config or options. Only reads: "
-      "no Modbus write function code, no CAN frame.");
+      "errors; 4: recorded, with errors\n(see the summary); 2: bad config or options, or the "
+      "database is being recorded by another\nrecorder (named; it holds DB.lock while it runs); "
+      "1: the database failed (e.g. busy for over 90 s:\nsamples wait in memory while another "
+      "process holds its write lock). Only reads: no Modbus write\nfunction code, no CAN frame.");
   struct Args {
     std::string config, db, loops, duration;
     bool quiet = false;
@@ -103,6 +124,10 @@ void add_record(CLI::App& app, int& exit_code) {
     }
     Recorder& rec = *rec_ptr;
     const bool tty = ::isatty(2) != 0;
+    for (std::int64_t r : rec.interrupted_runs())
+      std::cerr << "note: run " << r << " in " << a->db
+                << " was left 'recording' by a recorder that did not end cleanly (killed, or "
+                   "stopped by an error): marked 'interrupted'\n";
     std::cerr << "recording into " << a->db << "; Ctrl-C stops\n";
     const RecorderStatus s = rec.run(stop, [&](const RecorderStatus& st) {
       if (a->quiet) return;

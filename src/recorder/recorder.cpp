@@ -5,9 +5,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
+#include <optional>
 #include <thread>
 
+#include "valvediag/recorder_lock.hpp"
 #include "valvediag/text_stats.hpp"
 
 namespace valvediag {
@@ -45,7 +48,9 @@ struct Recorder::Impl {
   SiteConfig site;
   RecorderOptions opt;
   BusFactory factory;
+  std::unique_ptr<RecorderLock> db_lock;  // released after the database is closed
   std::unique_ptr<RecordingDb> db;
+  std::vector<std::int64_t> interrupted;
   std::int64_t run = 0;
   std::vector<PolledLoop> loops;
   std::vector<BusWorker> workers;
@@ -57,11 +62,15 @@ struct Recorder::Impl {
   std::uint64_t rows = 0, committed = 0, bad_rows = 0, missed = 0;
   double lateness_max = 0.0;
   std::string last_error;
-  struct ClosedGap {
-    std::int64_t loop_id, a, b;
-    std::string reason;
-  };
-  std::vector<ClosedGap> closed_gaps;
+  std::vector<GapRow> closed_gaps;
+
+  // Commit thread only: taken from the queue, not yet stored (the database was busy).
+  std::vector<SampleRow> pending;
+  std::vector<GapRow> pending_gaps;
+  std::optional<Clock::time_point> busy_since;
+  double busy_longest = 0.0;
+  std::uint64_t busy_times = 0, waiting_peak = 0;
+  std::string busy_message;
 
   // Under the mutex: counts and gap tracking for one finished row.
   void account(PolledLoop& l, std::size_t li, const SampleRow& r, const std::string& error) {
@@ -185,22 +194,64 @@ struct Recorder::Impl {
     s.lateness_max_s = lateness_max;
     s.loops = counts;
     s.last_error = last_error;
+    if (busy_since) {
+      s.busy_s = since(*busy_since, Clock::now());
+      s.waiting = rows - committed;
+    }
+    s.waiting_peak = std::max<std::uint64_t>(waiting_peak, s.waiting);
+    s.busy_longest_s = std::max(busy_longest, s.busy_s);
+    s.busy_times = busy_times;
+    s.busy_message = busy_message;
     for (const auto& w : workers) s.buses.emplace_back(w.bus->name(), w.bus->stats());
     return s;
   }
 
-  void commit() {
-    std::vector<SampleRow> batch;
-    std::vector<ClosedGap> gaps;
+  // Runs `write`; true when it was stored. A busy database (another process holding the write
+  // lock) returns false while it has been busy less than busy_limit_s, and throws after.
+  bool stored(const std::function<void()>& write, Clock::time_point now) {
+    try {
+      write();
+    } catch (const DatabaseBusyError& e) {
+      std::lock_guard lock(mutex);
+      if (!busy_since) {
+        busy_since = now;
+        ++busy_times;
+      }
+      busy_message = e.what();
+      waiting_peak = std::max<std::uint64_t>(waiting_peak, rows - committed);
+      if (since(*busy_since, now) <= opt.busy_limit_s) return false;
+      char b[160];
+      std::snprintf(b, sizeof b,
+                    "; still busy after %.0f s (the recorder waits up to %.0f s): stopped, %llu "
+                    "sample(s) held in memory not stored",
+                    since(*busy_since, now), opt.busy_limit_s,
+                    static_cast<unsigned long long>(rows - committed));
+      throw std::runtime_error(busy_message + b);
+    }
+    std::lock_guard lock(mutex);
+    if (busy_since) busy_longest = std::max(busy_longest, since(*busy_since, now));
+    busy_since.reset();
+    return true;
+  }
+
+  // Stores the rows and gaps produced so far; false while the database is busy (they wait).
+  bool commit(Clock::time_point now) {
     {
       std::lock_guard lock(mutex);
-      batch.swap(queue);
-      gaps.swap(closed_gaps);
+      if (pending.empty())
+        pending.swap(queue);  // the usual case: nothing waiting
+      else
+        pending.insert(pending.end(), queue.begin(), queue.end());
+      queue.clear();
+      pending_gaps.insert(pending_gaps.end(), closed_gaps.begin(), closed_gaps.end());
+      closed_gaps.clear();
     }
-    db->insert(batch);
-    for (const auto& g : gaps) db->add_gap(g.loop_id, g.a, g.b, g.reason);
+    if (!stored([&] { db->insert(pending, pending_gaps); }, now)) return false;
     std::lock_guard lock(mutex);
-    committed += batch.size();
+    committed += pending.size();
+    pending.clear();
+    pending_gaps.clear();
+    return true;
   }
 };
 
@@ -248,7 +299,10 @@ Recorder::Recorder(SiteConfig site, RecorderOptions options, BusFactory factory)
     w.bus = m.factory(b, on_bus);
     m.workers.push_back(std::move(w));
   }
+  m.db_lock = std::make_unique<RecorderLock>(m.opt.db_path);
   m.db = std::make_unique<RecordingDb>(m.opt.db_path);
+  // Holding the lock, no other recorder is running: a run still `recording` was cut short.
+  m.interrupted = m.db->mark_interrupted_runs();
 }
 
 Recorder::~Recorder() = default;
@@ -257,10 +311,15 @@ std::int64_t Recorder::run_id() const {
   return impl_->run;
 }
 
+const std::vector<std::int64_t>& Recorder::interrupted_runs() const {
+  return impl_->interrupted;
+}
+
 RecorderStatus Recorder::run(const std::atomic<bool>& stop,
                              const std::function<void(const RecorderStatus&)>& on_status) {
   Impl& m = *impl_;
   m.run = m.db->begin_run(m.site.file);
+  m.db_lock->set_run(m.run);
   for (auto& l : m.loops) l.db_id = m.db->add_loop(m.run, l.cfg);
 
   std::atomic<bool> done{false};
@@ -271,25 +330,30 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
       m.poll(w, t0, stop, done);
       --running;
     });
+  // Commits must not stall the status line: a busy database is retried each commit interval.
+  m.db->set_busy_timeout(0.25);
   auto last_commit = t0, last_status = t0;
   std::string failure;
+  auto report = [&](Clock::time_point now) {
+    if (on_status && since(last_status, now) >= m.opt.status_interval_s) {
+      on_status(m.status(since(t0, now)));
+      last_status = now;
+    }
+  };
   while (running.load() > 0) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
     const auto now = Clock::now();
     if (since(last_commit, now) >= m.opt.commit_interval_s) {
       try {
-        m.commit();
+        m.commit(now);
       } catch (const std::exception& e) {
-        failure = e.what();  // a full disk: stop, nothing more can be kept
+        failure = e.what();  // a full disk, a lock held too long: stop, nothing more can be kept
         done = true;
         break;
       }
       last_commit = now;
     }
-    if (on_status && since(last_status, now) >= m.opt.status_interval_s) {
-      on_status(m.status(since(t0, now)));
-      last_status = now;
-    }
+    report(now);
   }
   done = true;
   for (auto& w : m.workers)
@@ -303,10 +367,26 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
         l.gap_start = -1;
       }
   }
-  if (failure.empty()) m.commit();
+  // The rest, and the run's end, wait out a busy database as the commits did.
+  const std::string end = stop.load() ? "stopped" : "completed";
+  try {
+    while (failure.empty() && !m.commit(Clock::now())) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      report(Clock::now());
+    }
+    while (failure.empty() && !m.stored([&] { m.db->end_run(m.run, end); }, Clock::now()))
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  } catch (const std::exception& e) {
+    failure = e.what();
+  }
   const RecorderStatus s = m.status(since(t0, Clock::now()));
-  if (!failure.empty()) throw std::runtime_error(failure);
-  m.db->end_run(m.run, stop.load() ? "stopped" : "completed");
+  if (!failure.empty()) {
+    try {
+      m.db->end_run(m.run, "interrupted");
+    } catch (const std::exception&) {  // busy or failing: the next recorder marks it
+    }
+    throw std::runtime_error(failure);
+  }
   return s;
 }
 

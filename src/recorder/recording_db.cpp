@@ -11,7 +11,9 @@
 #include <filesystem>
 #include <type_traits>
 
+#include "utc_now.hpp"
 #include "valvediag/recorder.hpp"
+#include "valvediag/recorder_lock.hpp"
 #include "valvediag/schema_versions.hpp"
 
 namespace valvediag {
@@ -56,14 +58,6 @@ void require_recording(sqlite3* db, const std::string& path) {
         path + ": holds no recordings; record one with valvediag record --db " + path);
 }
 
-std::string utc_now() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char b[32];
-  std::strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return b;
-}
 }  // namespace
 
 struct RecordingDb::Impl {
@@ -71,18 +65,33 @@ struct RecordingDb::Impl {
   sqlite3_stmt* insert = nullptr;
   std::string path;
 
-  [[noreturn]] void fail(const std::string& what) const {
-    throw std::runtime_error(path + ": " + what + ": " + (db ? sqlite3_errmsg(db) : "no database") +
+  // `rc` and `message` are taken before any ROLLBACK, which resets them ("not an error").
+  [[noreturn]] void fail(const std::string& what, int rc, const std::string& message) const {
+    if (rc == SQLITE_BUSY || rc == SQLITE_LOCKED)
+      throw DatabaseBusyError(path + ": database busy (locked by another process) while " + what +
+                              "; SQLite does not say which process holds the lock: look for "
+                              "another program writing the file (e.g. fuser " +
+                              path + ")");
+    throw std::runtime_error(path + ": " + what + ": " + message +
                              " (check the disk has space and the file is writable)");
   }
-  void exec(const char* sql) {
+  [[noreturn]] void fail(const std::string& what, int rc) const {
+    fail(what, rc, db ? sqlite3_errmsg(db) : "no database");
+  }
+  [[noreturn]] void fail(const std::string& what) const {
+    fail(what, db ? sqlite3_errcode(db) : SQLITE_ERROR);
+  }
+  void exec(const char* sql, const char* what = "writing") {
     char* err = nullptr;
-    if (sqlite3_exec(db, sql, nullptr, nullptr, &err) != SQLITE_OK) {
+    const int rc = sqlite3_exec(db, sql, nullptr, nullptr, &err);
+    if (rc != SQLITE_OK) {
       std::string m = err ? err : "?";
       sqlite3_free(err);
+      if (rc == SQLITE_BUSY || rc == SQLITE_LOCKED) fail(what, rc, m);
       throw std::runtime_error(path + ": " + m + " (check the disk and the file's permissions)");
     }
   }
+  void rollback() { sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr); }
   sqlite3_stmt* prepare(const char* sql) {
     sqlite3_stmt* s = nullptr;
     if (sqlite3_prepare_v2(db, sql, -1, &s, nullptr) != SQLITE_OK) fail("preparing a statement");
@@ -121,14 +130,14 @@ void RecordingDb::open_tables(bool create) {
     return;
   }
   // One transaction: two recorders creating the tables at once create them once.
-  impl_->exec("BEGIN IMMEDIATE");
+  impl_->exec("BEGIN IMMEDIATE", "creating the tables");
   try {
     if (known_schema_version(impl_->db, path_, kRecordingTables) < 1) impl_->exec(kSchema);
     // Files from before versioning get their row too.
     set_schema_version(impl_->db, path_, kRecordingTables);
     impl_->exec("COMMIT");
   } catch (...) {
-    sqlite3_exec(impl_->db, "ROLLBACK", nullptr, nullptr, nullptr);
+    impl_->rollback();
     throw;
   }
 }
@@ -145,7 +154,7 @@ std::int64_t RecordingDb::begin_run(const std::string& config_file) {
   sqlite3_bind_text(s, 2, config_file.c_str(), -1, SQLITE_TRANSIENT);
   const int rc = sqlite3_step(s);
   sqlite3_finalize(s);
-  if (rc != SQLITE_DONE) impl_->fail("recording the run");
+  if (rc != SQLITE_DONE) impl_->fail("recording the run", rc);
   return sqlite3_last_insert_rowid(impl_->db);
 }
 
@@ -157,7 +166,26 @@ void RecordingDb::end_run(std::int64_t run, const std::string& status) {
   sqlite3_bind_int64(s, 3, run);
   const int rc = sqlite3_step(s);
   sqlite3_finalize(s);
-  if (rc != SQLITE_DONE) impl_->fail("closing the run");
+  if (rc != SQLITE_DONE) impl_->fail("closing the run", rc);
+}
+
+std::vector<std::int64_t> RecordingDb::mark_interrupted_runs() {
+  std::vector<std::int64_t> ids;
+  impl_->exec("BEGIN IMMEDIATE", "marking interrupted runs");
+  try {
+    sqlite3_stmt* s = impl_->prepare("SELECT id FROM runs WHERE status = 'recording' ORDER BY id");
+    int rc = 0;
+    while ((rc = sqlite3_step(s)) == SQLITE_ROW) ids.push_back(sqlite3_column_int64(s, 0));
+    sqlite3_finalize(s);
+    if (rc != SQLITE_DONE) impl_->fail("reading the runs", rc);
+    impl_->exec("UPDATE runs SET status = 'interrupted' WHERE status = 'recording'",
+                "marking interrupted runs");
+    impl_->exec("COMMIT", "marking interrupted runs");
+  } catch (...) {
+    impl_->rollback();
+    throw;
+  }
+  return ids;
 }
 
 std::int64_t RecordingDb::add_loop(std::int64_t run, const LoopConfigEntry& loop) {
@@ -172,17 +200,18 @@ std::int64_t RecordingDb::add_loop(std::int64_t run, const LoopConfigEntry& loop
   sqlite3_bind_int(s, 6, loop.point(PointName::mode).present);
   const int rc = sqlite3_step(s);
   sqlite3_finalize(s);
-  if (rc != SQLITE_DONE) impl_->fail("recording loop " + loop.name);
+  if (rc != SQLITE_DONE) impl_->fail("recording loop " + loop.name, rc);
   return sqlite3_last_insert_rowid(impl_->db);
 }
 
-void RecordingDb::insert(const std::vector<SampleRow>& rows) {
-  if (rows.empty()) return;
+void RecordingDb::insert(const std::vector<SampleRow>& rows, const std::vector<GapRow>& gaps) {
+  if (rows.empty() && gaps.empty()) return;
   if (!impl_->insert)
     impl_->insert = impl_->prepare(
         "INSERT OR REPLACE INTO samples(loop_id, tick, wall, lateness, op, pv, sp, mv, mode, "
         "q_op, q_pv, q_sp, q_mv, q_mode) VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)");
-  impl_->exec("BEGIN");
+  // IMMEDIATE: a busy database shows here, before any row is bound.
+  impl_->exec("BEGIN IMMEDIATE", "inserting samples");
   sqlite3_stmt* s = impl_->insert;
   for (const SampleRow& r : rows) {
     sqlite3_bind_int64(s, 1, r.loop_id);
@@ -197,14 +226,21 @@ void RecordingDb::insert(const std::vector<SampleRow>& rows) {
         sqlite3_bind_null(s, static_cast<int>(5 + i));  // never a made-up number
       sqlite3_bind_int(s, static_cast<int>(10 + i), static_cast<int>(r.values[i].quality));
     }
-    if (sqlite3_step(s) != SQLITE_DONE) {
-      sqlite3_reset(s);
-      impl_->exec("ROLLBACK");
-      impl_->fail("inserting samples");
-    }
+    const int rc = sqlite3_step(s);
     sqlite3_reset(s);
+    if (rc != SQLITE_DONE) {
+      const std::string m = sqlite3_errmsg(impl_->db);
+      impl_->rollback();
+      impl_->fail("inserting samples", rc, m);
+    }
   }
-  impl_->exec("COMMIT");
+  try {
+    for (const GapRow& g : gaps) add_gap(g.loop_id, g.first_tick, g.last_tick, g.reason);
+    impl_->exec("COMMIT", "inserting samples");
+  } catch (...) {
+    impl_->rollback();
+    throw;
+  }
 }
 
 void RecordingDb::add_gap(std::int64_t loop_id, std::int64_t first_tick, std::int64_t last_tick,
@@ -217,7 +253,11 @@ void RecordingDb::add_gap(std::int64_t loop_id, std::int64_t first_tick, std::in
   sqlite3_bind_text(s, 4, reason.c_str(), -1, SQLITE_TRANSIENT);
   const int rc = sqlite3_step(s);
   sqlite3_finalize(s);
-  if (rc != SQLITE_DONE) impl_->fail("recording a gap");
+  if (rc != SQLITE_DONE) impl_->fail("recording a gap", rc);
+}
+
+void RecordingDb::set_busy_timeout(double seconds) {
+  sqlite3_busy_timeout(impl_->db, static_cast<int>(std::lround(seconds * 1e3)));
 }
 
 std::string RecordingDb::integrity_check() {
@@ -232,6 +272,14 @@ std::string RecordingDb::integrity_check() {
 }
 
 namespace {
+std::string describe_runs(const std::vector<RunInfo>& runs) {
+  std::string s;
+  for (const RunInfo& r : runs)
+    s += (s.empty() ? "" : ", ") + std::to_string(r.id) + " (started " + r.started_utc + ", " +
+         r.status + ")";
+  return s;
+}
+
 std::string fmt_time(double t) {
   char b[32];
   std::snprintf(b, sizeof b, "%.6g", t);
@@ -264,6 +312,33 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     return s;
   };
   RecordedLoop out;
+  {
+    // The runs with this loop; `recording` without a recorder holding the lock for it was cut
+    // short (a reader opens read-only: the next recorder marks it).
+    const std::optional<LockHolder> holder = recorder_holding(db_path);
+    sqlite3_stmt* s = prepare(
+        "SELECT r.id, r.started_utc, r.status FROM runs r JOIN loops l ON l.run_id = r.id "
+        "WHERE l.name = ? ORDER BY r.id");
+    sqlite3_bind_text(s, 1, name.c_str(), -1, SQLITE_TRANSIENT);
+    while (sqlite3_step(s) == SQLITE_ROW) {
+      RunInfo r;
+      r.id = sqlite3_column_int64(s, 0);
+      auto text = [&](int i) {
+        const unsigned char* t = sqlite3_column_text(s, i);
+        return t ? std::string(reinterpret_cast<const char*>(t)) : std::string("?");
+      };
+      r.started_utc = text(1);
+      r.status = text(2);
+      if (r.status == "recording" && !(holder && (holder->run == r.id || holder->run == 0)))
+        r.status = "interrupted";
+      out.runs.push_back(r);
+    }
+    sqlite3_finalize(s);
+  }
+  if (run > 0 && !out.runs.empty() &&
+      std::none_of(out.runs.begin(), out.runs.end(), [&](const RunInfo& r) { return r.id == run; }))
+    throw std::runtime_error(db_path + ": no run " + std::to_string(run) + " with loop '" + name +
+                             "'; runs with it: " + describe_runs(out.runs) + " (--run ID)");
   std::int64_t loop_id = 0;
   bool has_sp = false, has_mv = false;
   {
@@ -456,6 +531,8 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     out.notes.push_back("the range has " + std::to_string(gaps.size()) + " gap(s) (" + list +
                         "); using the longest clean stretch, " + stretch);
   }
+  for (const RunInfo& r : out.runs)
+    if (r.id == out.run) out.run_info = r;
   out.rows = ticks.size();
   if (ticks.empty())
     throw std::runtime_error(db_path + ": loop " + name + " has no samples in the range");

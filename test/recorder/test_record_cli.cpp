@@ -105,6 +105,69 @@ TEST_CASE("kill -9 of the recorder: database intact, at most 1 s lost") {
   CHECK(plc.write_requests() == 0);
 }
 
+TEST_CASE("two recorders: the second is refused; kill -9 leaves no block; the run is interrupted") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string site = write_site("two.toml", plc.port(), 0.05);
+  const std::string db = fresh("two.sqlite");
+  const pid_t first =
+      spawn({VALVEDIAG_BIN, "record", "--config", site, "--db", db, "--quiet", "--duration", "60s"},
+            kTmp / "two-first.txt");
+  REQUIRE(test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 20.0));
+  Result r = run({"record", "--config", site, "--db", db, "--duration", "1s", "--quiet"}, 20.0);
+  INFO(r.out);
+  CHECK(r.status == 2);
+  CHECK(r.out.find("error: " + db + " is being recorded by valvediag pid " + std::to_string(first) +
+                   " on host ") != std::string::npos);
+  CHECK(r.out.find("(run 1); a second recorder would poll the PLC twice") != std::string::npos);
+  CHECK(scalar(db, "SELECT count(*) FROM runs") == 1);  // the refused one began no run
+  // While it records, a reader sees the run as being recorded.
+  const fs::path csv = kTmp / "two.csv";
+  r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string()});
+  CHECK(r.out.find("export: loop FIC101 of run 1 (started ") != std::string::npos);
+  CHECK(r.out.find(", recording: still being recorded, read so far)") != std::string::npos);
+
+  ::kill(first, SIGKILL);
+  CHECK(wait_child(first, 10.0) == -2);
+  const std::string lock = fs::weakly_canonical(db).string() + ".lock";
+  CHECK(fs::exists(lock));  // left by the killed recorder, locked by nobody
+  std::string status;
+  scalar(db, "SELECT status FROM runs WHERE id = 1", &status);
+  CHECK(status == "recording");
+  r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string()});
+  CHECK(r.out.find("of run 1 (started ") != std::string::npos);
+  CHECK(r.out.find(", interrupted)") != std::string::npos);  // read as what it is
+
+  // The stale file does not block the next recorder, which marks the run.
+  r = run({"record", "--config", site, "--db", db, "--duration", "1s", "--quiet"}, 20.0);
+  CHECK((r.status == 0 || r.status == 4));
+  CHECK(r.out.find("note: run 1 in " + db +
+                   " was left 'recording' by a recorder that did not end "
+                   "cleanly") != std::string::npos);
+  scalar(db, "SELECT status FROM runs WHERE id = 1", &status);
+  CHECK(status == "interrupted");
+  scalar(db, "SELECT status FROM runs WHERE id = 2", &status);
+  CHECK(status == "completed");
+  CHECK(!fs::exists(lock));
+
+  // export says which run it takes, names the other, and lists the runs for a wrong --run.
+  r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string(), "--from", "0.2"});
+  CHECK(r.out.find("export: loop FIC101 of run 2 (started ") != std::string::npos);
+  CHECK(r.out.find(", completed); other runs with it: 1 (--run ID)") != std::string::npos);
+  r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string(), "--run", "7"});
+  CHECK(r.status == 2);
+  CHECK(r.out.find(db + ": no run 7 with loop 'FIC101'; runs with it: 1 (started ") !=
+        std::string::npos);
+  CHECK(r.out.find(", interrupted), 2 (started ") != std::string::npos);
+  CHECK(r.out.find(", completed) (--run ID)") != std::string::npos);
+  r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string(), "--run", "1", "--to",
+           "0.2"});
+  CHECK(r.status == 0);
+  CHECK(r.out.find("export: loop FIC101 of run 1 (started ") != std::string::npos);
+  CHECK(r.out.find("other runs with it: 2 (--run ID)") != std::string::npos);
+  CHECK(plc.write_requests() == 0);
+}
+
 TEST_CASE("a config error is reported with file and line before any bus traffic") {
   SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
   plc.start();

@@ -14,6 +14,7 @@
 #include "../common/sqlite_exec.hpp"
 #include "valvediag/bus_factory.hpp"
 #include "valvediag/recorder.hpp"
+#include "valvediag/recorder_lock.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sim_plc.hpp"
 
@@ -474,4 +475,134 @@ TEST_CASE("recordings from before table versions stay readable; newer tables are
   const std::string m = error_of([&] { read_recorded_loop(sweeps_only, "FIC101"); });
   CHECK(m.find(sweeps_only + ": holds no recordings; record one with valvediag record") !=
         std::string::npos);
+}
+
+namespace {
+// Another process's writer: once the recorder has stored some samples, holds SQLite's write
+// lock on `db` for `hold_s`; `taken` says it got it (a thread of the test stands in for the other
+// process: SQLite locks per connection).
+std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bool>& taken) {
+  return std::thread([db, hold_s, &taken] {
+    if (!test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 10.0))
+      return;
+    sqlite3* c = nullptr;
+    sqlite3_open(db.c_str(), &c);
+    sqlite3_busy_timeout(c, 5000);
+    const bool ok = sqlite3_exec(c, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK;
+    taken = ok;
+    if (ok) {
+      std::this_thread::sleep_for(std::chrono::duration<double>(hold_s));
+      sqlite3_exec(c, "COMMIT", nullptr, nullptr, nullptr);
+    }
+    sqlite3_close(c);
+  });
+}
+}  // namespace
+
+TEST_CASE("a write lock held 8 s by another process: samples wait in memory, nothing is lost") {
+  // Before, the recorder gave up after SQLite's 5 s busy timeout ("inserting samples: not an
+  // error") and kept what it had stored until then. Locks of up to a minute are the designed
+  // bound (busy_limit_s, 90 s by default); 8 s exceeds the old timeout without a minute's wait.
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string db = fresh_db("busy");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 11.0;
+  o.loops = {"FIC101"};
+  o.status_interval_s = 0.2;
+  Recorder rec(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false}, taken{false};
+  std::thread locker = hold_write_lock(db, 8.0, taken);
+  std::uint64_t waiting_max = 0;
+  double busy_max = 0.0;
+  const RecorderStatus s = rec.run(stop, [&](const RecorderStatus& st) {
+    waiting_max = std::max(waiting_max, st.waiting);
+    busy_max = std::max(busy_max, st.busy_s);
+  });
+  locker.join();
+  REQUIRE(taken.load());
+  MESSAGE("busy " << s.busy_longest_s << " s, up to " << s.waiting_peak << " rows in memory");
+  CHECK(s.loops[0].rows == 220);
+  CHECK(s.committed == 220);
+  CHECK(scalar(db, "SELECT count(*) FROM samples") == 220);
+  CHECK(scalar(db, "SELECT max(tick) + 1 - count(*) FROM samples") == 0);  // no hole
+  CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed'") == 1);
+  CHECK(s.busy_times == 1);
+  CHECK(s.busy_longest_s >= 7.0);
+  CHECK(s.busy_longest_s <= 10.0);
+  // 8 s of 50 ms ticks waited in memory, and the status said so while it lasted.
+  CHECK(s.waiting_peak >= 140);
+  CHECK(s.waiting_peak <= 220);
+  CHECK(busy_max >= 7.0);
+  CHECK(waiting_max >= 130);
+  CHECK(s.busy_message.find(db + ": database busy (locked by another process)") !=
+        std::string::npos);
+  CHECK(s.busy_message.find("SQLite does not say which process") != std::string::npos);
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE("a write lock held past the recorder's limit stops it with a message, never a hang") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string db = fresh_db("busy_limit");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 30.0;
+  o.loops = {"FIC101"};
+  o.busy_limit_s = 1.5;  // the test's stand-in for the 90 s default
+  auto rec = std::make_unique<Recorder>(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false}, taken{false};
+  std::thread locker = hold_write_lock(db, 5.0, taken);
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string m = error_of([&] { rec->run(stop); });
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  locker.join();
+  REQUIRE(taken.load());
+  INFO(m);
+  CHECK(took < 10.0);  // stopped at the limit, not at the 30 s duration
+  CHECK(m.find(db + ": database busy (locked by another process) while inserting samples") !=
+        std::string::npos);
+  CHECK(m.find("SQLite does not say which process holds the lock") != std::string::npos);
+  CHECK(m.find("(the recorder waits up to 2 s): stopped") != std::string::npos);
+  CHECK(m.find("sample(s) held in memory not stored") != std::string::npos);
+  CHECK(m.find("not an error") == std::string::npos);
+  CHECK(scalar(db, "SELECT count(*) FROM samples") >= 10);  // what was stored is kept
+  // The aborted run is `recording` no longer once the next recorder opens the database.
+  rec.reset();
+  Recorder next(fast_site(plc.port()), o, make_bus);
+  CHECK(next.interrupted_runs() == std::vector<std::int64_t>{1});
+  CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'interrupted' AND id = 1") == 1);
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE("a second recorder on a database is refused, naming the first; free once it ends") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string db = fresh_db("two");
+  RecorderOptions o;
+  o.db_path = db;
+  o.duration_s = 0.5;
+  o.loops = {"FIC101"};
+  const std::string lock = fs::weakly_canonical(db).string() + ".lock";
+  {
+    Recorder first(fast_site(plc.port()), o, make_bus);
+    CHECK(fs::exists(lock));
+    const std::string m = error_of([&] { Recorder second(fast_site(plc.port()), o, make_bus); });
+    CHECK(m.find(db + " is being recorded by valvediag pid " + std::to_string(::getpid()) +
+                 " on host ") != std::string::npos);
+    CHECK(m.find("a second recorder would poll the PLC twice: stop that one first") !=
+          std::string::npos);
+    CHECK_THROWS_AS(Recorder(fast_site(plc.port()), o, make_bus), DatabaseInUseError);
+    std::atomic<bool> stop{false};
+    first.run(stop);
+    CHECK(first.run_id() == 1);
+  }
+  CHECK(!fs::exists(lock));  // removed when the recorder ends
+  Recorder third(fast_site(plc.port()), o, make_bus);
+  std::atomic<bool> stop{false};
+  third.run(stop);
+  CHECK(third.run_id() == 2);
+  CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed'") == 2);
+  CHECK(no_writes(plc));
 }
