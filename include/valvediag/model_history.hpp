@@ -10,6 +10,7 @@
 
 #include "valvediag/loop_data.hpp"
 #include "valvediag/model_fit.hpp"
+#include "valvediag/utc_time.hpp"  // utc_timestamp(): the entries' time stamps
 
 namespace valvediag {
 
@@ -47,7 +48,5 @@ std::size_t append_history(const std::string& path, const std::vector<HistoryEnt
 bool try_append_history(const std::string& path, const std::vector<HistoryEntry>& entries,
                         std::string& why, std::size_t* total = nullptr);
 HistoryEntry history_entry(const ModelFit& fit, const std::string& command);
-// Now, UTC, ISO 8601 (the entries' time stamps).
-std::string utc_timestamp();
 
 }  // namespace valvediag

@@ -12,7 +12,7 @@
 #include <sstream>
 #include <thread>
 
-#include "utc_now.hpp"
+#include "valvediag/utc_time.hpp"
 
 namespace valvediag {
 
@@ -104,7 +104,7 @@ RecorderLock::RecorderLock(const std::string& db_path) : path_(recorder_lock_pat
   if (::gethostname(host, sizeof host) != 0) std::strcpy(host, "?");
   host[sizeof host - 1] = '\0';
   me_.host = host;
-  me_.started_utc = utc_now();
+  me_.started_utc = utc_timestamp();
   write_holder();
 }
 

@@ -11,10 +11,10 @@
 #include <filesystem>
 #include <type_traits>
 
-#include "utc_now.hpp"
 #include "valvediag/recorder.hpp"
 #include "valvediag/recorder_lock.hpp"
 #include "valvediag/schema_versions.hpp"
+#include "valvediag/utc_time.hpp"
 
 namespace valvediag {
 
@@ -149,7 +149,7 @@ RecordingDb::~RecordingDb() {
 
 std::int64_t RecordingDb::begin_run(const std::string& config_file) {
   sqlite3_stmt* s = impl_->prepare("INSERT INTO runs(started_utc, config_file) VALUES(?, ?)");
-  const std::string now = utc_now();
+  const std::string now = utc_timestamp();
   sqlite3_bind_text(s, 1, now.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(s, 2, config_file.c_str(), -1, SQLITE_TRANSIENT);
   const int rc = sqlite3_step(s);
@@ -160,7 +160,7 @@ std::int64_t RecordingDb::begin_run(const std::string& config_file) {
 
 void RecordingDb::end_run(std::int64_t run, const std::string& status) {
   sqlite3_stmt* s = impl_->prepare("UPDATE runs SET ended_utc = ?, status = ? WHERE id = ?");
-  const std::string now = utc_now();
+  const std::string now = utc_timestamp();
   sqlite3_bind_text(s, 1, now.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(s, 2, status.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_int64(s, 3, run);

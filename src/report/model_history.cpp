@@ -62,15 +62,6 @@ double num_of(const nlohmann::json& j) {
 
 }  // namespace
 
-std::string utc_timestamp() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 std::vector<HistoryEntry> load_history(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec))

@@ -1,4 +1,5 @@
-// The recorder's timestamps: "2026-11-29T18:43:11Z".
+// Now, UTC, ISO 8601 ("2026-11-29T18:43:11Z"): the time stamps of recordings, model histories,
+// reports and sweeps. Header-only so the recorder and the report libraries share it.
 #pragma once
 
 #include <ctime>
@@ -6,7 +7,7 @@
 
 namespace valvediag {
 
-inline std::string utc_now() {
+inline std::string utc_timestamp() {
   const std::time_t t = std::time(nullptr);
   std::tm tm{};
   gmtime_r(&t, &tm);
