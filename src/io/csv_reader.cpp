@@ -438,29 +438,29 @@ bool is_time_stamp(std::string_view cell) {
   return false;
 }
 
-// The formats that read every stamp in `cells`; of those, the ones under which time increases
-// when there are any (a day/month swap that runs backwards is decided by the data).
+// The formats that read every stamp in `cells`; of those, the ones under which time increases,
+// and of these the ones with regular steps, when there are any: the data decide a day/month
+// order that runs backwards or jumps a month at midnight.
 std::vector<std::string_view> matching_time_formats(const std::vector<std::string>& cells) {
-  std::vector<std::string_view> all, increasing;
+  std::vector<std::string_view> all, increasing, regular;
   for (std::string_view f : kTimeFormats) {
-    bool ok = !cells.empty(), up = true;
-    double prev = -std::numeric_limits<double>::infinity();
+    std::vector<double> t;
     for (const std::string& c : cells) {
       detail::TimeStamp ts;
       std::string why;
-      if (!detail::parse_time_stamp(c, f, ts, why)) {
-        ok = false;
-        break;
-      }
-      const double t = static_cast<double>(ts.seconds) + ts.fraction;
-      up = up && t > prev;
-      prev = t;
+      if (!detail::parse_time_stamp(c, f, ts, why)) break;
+      t.push_back(static_cast<double>(ts.seconds) + ts.fraction);
     }
-    if (!ok) continue;
+    if (t.empty() || t.size() < cells.size()) continue;
     all.push_back(f);
-    if (up) increasing.push_back(f);
+    std::vector<double> steps;
+    for (std::size_t i = 1; i < t.size(); ++i) steps.push_back(t[i] - t[i - 1]);
+    if (std::any_of(steps.begin(), steps.end(), [](double d) { return !(d > 0); })) continue;
+    increasing.push_back(f);
+    const auto [lo, hi] = std::minmax_element(steps.begin(), steps.end());
+    if (steps.empty() || *hi - *lo <= kSamplingTolerance * *lo) regular.push_back(f);
   }
-  return increasing.empty() ? all : increasing;
+  return !regular.empty() ? regular : !increasing.empty() ? increasing : all;
 }
 
 bool is_number(std::string_view cell) {

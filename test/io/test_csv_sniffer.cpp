@@ -100,6 +100,13 @@ TEST_CASE("auto: day/month order is refused unless the data decide it") {
       parse(historian(',', "13/02/2024 %02d:%02d:00", 30, false), auto_format(), &notes);
   CHECK(d.size() == 30);
   CHECK(has(notes[0], "--time-format '%d/%m/%Y %H:%M:%S'"));
+  // Across midnight: 02/01 23:59 -> 03/01 00:00 is a minute as day/month, a month as
+  // month/day: the regular sampling decides.
+  const std::string midnight =
+      "t,op,pv\n02/01/2024 23:58:00,1,2\n02/01/2024 23:59:00,2,3\n03/01/2024 00:00:00,3,4\n";
+  notes.clear();
+  CHECK(parse(midnight, auto_format(), &notes).t == std::vector<double>{0, 60, 120});
+  CHECK(has(notes[0], "--time-format '%d/%m/%Y %H:%M:%S'"));
   // Given, it wins.
   CsvOptions o = auto_format();
   o.time_format = std::string("%m/%d/%Y %H:%M:%S");
