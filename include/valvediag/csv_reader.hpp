@@ -1,12 +1,15 @@
 // Reads one control loop from a delimited text file (CSV, historian exports).
 //
-// Layout: `skip_lines` raw lines, then (after blank and `#` comment lines) the header row, then
-// `skip_after_header` raw lines (units, descriptions), then one sample per row. Blank and `#`
-// lines among the data are ignored. Cells may be quoted ("a,b", "" for a quote). Line ends may be
-// LF, CRLF or CR; a UTF-8 byte-order mark is skipped.
+// Layout (format "plain"): `skip_lines` raw lines, then (after blank and `#` comment lines) the
+// header row, then `skip_after_header` raw lines (units, descriptions), then one sample per row.
+// Blank and `#` lines among the data are ignored. Cells may be quoted ("a,b", "" for a quote). Line
+// ends may be LF, CRLF or CR; a UTF-8 byte-order mark is skipped.
 //
 // The file is read line by line: memory follows the rows kept (CsvOptions::max_rows caps them),
 // and a line longer than 1 MiB (binary data, /dev/zero) is refused at its line number.
+//
+// Format "auto" first sniffs the layout fields the user did not set (CsvOptions::given) from
+// the file's first 200 lines (at most 1 MiB); README.md "Data input" says what it looks for.
 //
 // Every problem throws DataError naming the file, line and column: unreadable file, missing
 // column, empty / non-numeric / NaN / infinite cell, a row with too few cells or with more cells
@@ -29,7 +32,20 @@ namespace valvediag {
 // a file of t, op, pv just beyond the cap, well within a laptop.
 inline constexpr std::size_t kDefaultMaxRows = 10'000'000;
 
+// Which layout fields the user set: format "auto" sniffs only the others.
+struct CsvGiven {
+  bool delimiter = false, skip_lines = false, skip_after_header = false, time_format = false,
+       decimal = false, t = false, op = false, pv = false, sp = false;
+};
+
 struct CsvOptions {
+  // "plain": the layout below as it is. "auto": the fields not marked in `given` are sniffed
+  // from the file's first lines: delimiter, lines before the header and between header and data,
+  // the time column and its date-time format, decimal comma, historian tags (*.MV/.OP/.OUT: op,
+  // *.PV: pv, *.SV/.SP: sp). A choice it cannot make (two *.PV columns, day/month order) is a
+  // DataError naming the option that makes it.
+  std::string format = "plain";
+  CsvGiven given{};
   // ",", ";", "tab", "space" (runs of blanks), "|", any other single punctuation character, or
   // "auto": tab, ';' or ',' (whichever the header row has most of), else blanks.
   std::string delimiter = "auto";

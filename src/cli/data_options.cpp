@@ -31,35 +31,49 @@ void add_data_options(CLI::App* cmd, DataOptions& d) {
 
 void add_layout_options(CLI::App* cmd, DataOptions& d) {
   const char* g = "Input";
-  cmd->add_option("--t", d.csv.t_column,
-                  "time column name or 1-based index ('none': no time column)")
+  cmd->add_option("--format", d.format,
+                  "CSV layout: 'auto' finds the delimiter, lines before the header and between "
+                  "header and data, the time column and its date-time format, decimal comma and "
+                  "historian tags (*.MV/*.OP/*.OUT, *.PV, *.SV/*.SP) from the first 200 lines, "
+                  "and prints what it chose; options given win. 'plain': only the options")
+      ->check(CLI::IsMember({"auto", "plain"}))
       ->group(g)
       ->capture_default_str();
-  cmd->add_option("--op", d.csv.op_column,
-                  "controller output column (.mat: field of the loop struct, or 1-based column "
-                  "of a matrix)")
-      ->group(g)
-      ->capture_default_str();
-  cmd->add_option("--pv", d.csv.pv_column, "process variable column")
-      ->group(g)
-      ->capture_default_str();
-  cmd->add_option("--sp", d.csv.sp_column, "set point column ('none' to ignore)")->group(g);
+  d.given.t = cmd->add_option("--t", d.csv.t_column,
+                              "time column name or 1-based index ('none': no time column)")
+                  ->group(g)
+                  ->capture_default_str();
+  d.given.op =
+      cmd->add_option("--op", d.csv.op_column,
+                      "controller output column (.mat: field of the loop struct, or 1-based column "
+                      "of a matrix)")
+          ->group(g)
+          ->capture_default_str();
+  d.given.pv = cmd->add_option("--pv", d.csv.pv_column, "process variable column")
+                   ->group(g)
+                   ->capture_default_str();
+  d.given.sp =
+      cmd->add_option("--sp", d.csv.sp_column, "set point column ('none' to ignore)")->group(g);
   cmd->add_option("--mv", d.csv.mv_column, "measured valve position column ('none' to ignore)")
       ->group(g);
-  cmd->add_option("--delimiter", d.csv.delimiter, "',', ';', 'tab', 'space' or 'auto'")
-      ->group(g)
-      ->capture_default_str();
-  cmd->add_option("--skip-lines", d.csv.skip_lines, "lines before the header row")->group(g);
-  cmd->add_option("--skip-after-header", d.csv.skip_after_header, "lines between header and data")
-      ->group(g);
-  cmd->add_option("--time-format", d.csv.time_format,
-                  "'seconds' or a pattern like '%Y-%m-%d %H:%M:%S'")
-      ->group(g)
-      ->capture_default_str();
-  cmd->add_option("--decimal", d.decimal, "decimal separator in numbers: '.' or ','")
-      ->check(CLI::IsMember({".", ","}))
-      ->group(g)
-      ->capture_default_str();
+  d.given.delimiter =
+      cmd->add_option("--delimiter", d.csv.delimiter, "',', ';', 'tab', 'space' or 'auto'")
+          ->group(g)
+          ->capture_default_str();
+  d.given.skip_lines =
+      cmd->add_option("--skip-lines", d.csv.skip_lines, "lines before the header row")->group(g);
+  d.given.skip_after_header = cmd->add_option("--skip-after-header", d.csv.skip_after_header,
+                                              "lines between header and data")
+                                  ->group(g);
+  d.given.time_format = cmd->add_option("--time-format", d.csv.time_format,
+                                        "'seconds' or a pattern like '%Y-%m-%d %H:%M:%S'")
+                            ->group(g)
+                            ->capture_default_str();
+  d.given.decimal =
+      cmd->add_option("--decimal", d.decimal, "decimal separator in numbers: '.' or ','")
+          ->check(CLI::IsMember({".", ","}))
+          ->group(g)
+          ->capture_default_str();
   cmd->add_flag("--resample", d.csv.resample, "interpolate irregular sampling onto a uniform grid")
       ->group(g);
   cmd->add_option("--max-rows", d.csv.max_rows,
@@ -166,6 +180,12 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
     return read_mat_loop_isolated(d.data, d.loop, m, &notes);
   }
   d.csv.decimal = d.decimal[0];
+  d.csv.format = d.format;
+  auto given = [](const CLI::Option* o) { return o != nullptr && o->count() > 0; };
+  const DataOptions::Given& g = d.given;
+  d.csv.given = {given(g.delimiter),   given(g.skip_lines), given(g.skip_after_header),
+                 given(g.time_format), given(g.decimal),    given(g.t),
+                 given(g.op),          given(g.pv),         given(g.sp)};
   return read_loop_csv(d.data, d.csv, &notes);
 }
 

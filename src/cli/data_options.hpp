@@ -22,6 +22,14 @@ struct DataOptions {
   std::string decimal = ".";
   std::string db, loop, from, to;  // a recorded loop (valvediag record) instead of a file;
                                    // loop also names the loop inside a .mat file
+  // "auto" (sniff the CSV layout the options leave open) or "plain"; see CsvOptions::format.
+  std::string format = "auto";
+  // The layout options as registered, to tell which the user gave (their count()).
+  struct Given {
+    CLI::Option *delimiter = nullptr, *skip_lines = nullptr, *skip_after_header = nullptr,
+                *time_format = nullptr, *decimal = nullptr, *t = nullptr, *op = nullptr,
+                *pv = nullptr, *sp = nullptr;
+  } given;
   // False: a .mat loop without PV is read with pv empty (a sweep gives its OP figures).
   bool require_pv = true;
 };

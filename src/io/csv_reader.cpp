@@ -58,11 +58,13 @@ class Lines {
                ? '\n'
                : '\r';
   }
-  Lines(std::FILE* f, const std::string& file) : file_(file), f_(f), eof_(false) {
-    while (!eof_ && buf_.size() <= kMaxLineBytes) {
-      const std::size_t old = buf_.size();
+  // `head`: the file's first bytes, already read from f.
+  Lines(std::FILE* f, const std::string& file, std::string head = {})
+      : file_(file), f_(f), buf_(std::move(head)), data_(buf_), eof_(false) {
+    for (std::size_t old = 0; std::memchr(buf_.data() + old, '\n', buf_.size() - old) == nullptr;) {
+      if (eof_ || buf_.size() > kMaxLineBytes) break;
+      old = buf_.size();
       fill();
-      if (std::memchr(buf_.data() + old, '\n', buf_.size() - old) != nullptr) break;
     }
     eol_ =
         buf_.find('\n') != std::string::npos || buf_.find('\r') == std::string::npos ? '\n' : '\r';
@@ -417,6 +419,360 @@ void resolve(Column& col, const std::vector<std::string_view>& names, const std:
   throw DataError(file, header_line, spec, problem, col.role);
 }
 
+// ---- Format "auto": the layout sniffed from the first lines ----
+
+constexpr std::size_t kSniffLines = 200;
+constexpr std::size_t kSniffBytes = std::size_t{1} << 20;
+
+// The usual historian stamps (%S also takes a fraction); day/month order is left to the data.
+constexpr std::string_view kTimeFormats[] = {
+    "%Y-%m-%d %H:%M:%S", "%Y-%m-%dT%H:%M:%S", "%Y/%m/%d %H:%M:%S", "%d.%m.%Y %H:%M:%S",
+    "%m/%d/%Y %H:%M:%S", "%d/%m/%Y %H:%M:%S", "%Y-%m-%d %H:%M",    "%d.%m.%Y %H:%M",
+    "%m/%d/%Y %H:%M",    "%d/%m/%Y %H:%M"};
+
+bool is_time_stamp(std::string_view cell) {
+  detail::TimeStamp ts;
+  std::string why;
+  for (std::string_view f : kTimeFormats)
+    if (detail::parse_time_stamp(cell, f, ts, why)) return true;
+  return false;
+}
+
+// The formats that read every stamp in `cells`; of those, the ones under which time increases,
+// and of these the ones with regular steps, when there are any: the data decide a day/month
+// order that runs backwards or jumps a month at midnight.
+std::vector<std::string_view> matching_time_formats(const std::vector<std::string>& cells) {
+  std::vector<std::string_view> all, increasing, regular;
+  for (std::string_view f : kTimeFormats) {
+    std::vector<double> t;
+    for (const std::string& c : cells) {
+      detail::TimeStamp ts;
+      std::string why;
+      if (!detail::parse_time_stamp(c, f, ts, why)) break;
+      t.push_back(static_cast<double>(ts.seconds) + ts.fraction);
+    }
+    if (t.empty() || t.size() < cells.size()) continue;
+    all.push_back(f);
+    std::vector<double> steps;
+    for (std::size_t i = 1; i < t.size(); ++i) steps.push_back(t[i] - t[i - 1]);
+    if (std::any_of(steps.begin(), steps.end(), [](double d) { return !(d > 0); })) continue;
+    increasing.push_back(f);
+    const auto [lo, hi] = std::minmax_element(steps.begin(), steps.end());
+    if (steps.empty() || *hi - *lo <= kSamplingTolerance * *lo) regular.push_back(f);
+  }
+  return !regular.empty() ? regular : !increasing.empty() ? increasing : all;
+}
+
+bool is_number(std::string_view cell) {
+  std::string buf;
+  double v = 0;
+  return parse_number(cell, '.', buf, v) == Num::ok || parse_number(cell, ',', buf, v) == Num::ok;
+}
+
+// A row of text: no cell is a number or a time stamp (units, descriptions, a second header).
+bool text_row(const std::vector<std::string_view>& cells) {
+  return std::none_of(cells.begin(), cells.end(),
+                      [](std::string_view c) { return is_number(c) || is_time_stamp(c); });
+}
+
+// The most frequent value of `v` (the smallest of equals) and how often it occurs; {0, 0} when
+// v is empty.
+std::pair<std::size_t, std::size_t> most_common(std::vector<std::size_t> v) {
+  std::sort(v.begin(), v.end());
+  std::pair<std::size_t, std::size_t> best{0, 0};
+  for (std::size_t i = 0, j = 0; i < v.size(); i = j) {
+    while (j < v.size() && v[j] == v[i]) ++j;
+    if (j - i > best.second) best = {v[i], j - i};
+  }
+  return best;
+}
+
+// Lines of the head of a file (the whole text when `whole`, else without its cut last line).
+std::vector<std::string_view> head_lines(std::string_view head, bool whole) {
+  if (head.substr(0, 3) == "\xEF\xBB\xBF") head.remove_prefix(3);
+  const char eol =
+      head.find('\n') != std::string_view::npos || head.find('\r') == std::string_view::npos ? '\n'
+                                                                                             : '\r';
+  std::vector<std::string_view> out;
+  std::size_t pos = 0;
+  while (pos < head.size() && out.size() < kSniffLines) {
+    std::size_t e = head.find(eol, pos);
+    if (e == std::string_view::npos) {
+      if (!whole) break;
+      e = head.size();
+    }
+    std::string_view l = head.substr(pos, e - pos);
+    if (!l.empty() && l.back() == '\r') l.remove_suffix(1);
+    out.push_back(l);
+    pos = e + 1;
+  }
+  return out;
+}
+
+// Cells of a line without trailing empty ones (a delimiter at the end of every row); 0 for a
+// line the splitter refuses.
+std::size_t split_trimmed(Splitter& s, std::string_view line,
+                          std::vector<std::string_view>& cells) {
+  if (s.split(line, kNone, cells) != Split::ok) return 0;
+  while (!cells.empty() && cells.back().empty()) cells.pop_back();
+  return cells.size();
+}
+
+std::string delimiter_option(Delimiter d) {
+  if (d.blanks) return "space";
+  if (d.c == '\t') return "tab";
+  return std::string(1, d.c);
+}
+
+// A value as the shell takes it: quoted unless plain.
+std::string shell_word(std::string_view s) {
+  const bool plain = !s.empty() && std::all_of(s.begin(), s.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || std::strchr("_.,:/=+-", c) != nullptr;
+  });
+  if (plain) return std::string(s);
+  std::string out = "'";
+  for (char c : s) {
+    if (c == '\'') out += "'\\'";  // close, escaped quote, reopen
+    out += c;
+  }
+  out += '\'';
+  return out;
+}
+
+// " or " and the next format, for lists of --time-format choices.
+std::string shell_words_sep(const std::string& so_far, std::string_view format) {
+  std::string s = so_far.empty() ? std::string() : std::string(" or ");
+  s += shell_word(format);
+  return s;
+}
+
+// Columns whose name ends in one of `suffixes` (case-insensitive).
+std::vector<std::size_t> tagged(const std::vector<std::string>& names,
+                                std::initializer_list<std::string_view> suffixes) {
+  std::vector<std::size_t> hits;
+  for (std::size_t i = 0; i < names.size(); ++i)
+    for (std::string_view suf : suffixes)
+      if (names[i].size() > suf.size() &&
+          iequal(std::string_view(names[i]).substr(names[i].size() - suf.size()), suf)) {
+        hits.push_back(i);
+        break;
+      }
+  return hits;
+}
+
+bool has_name(const std::vector<std::string>& names, std::string_view name) {
+  return std::any_of(names.begin(), names.end(),
+                     [&](const std::string& n) { return iequal(n, name); });
+}
+
+// The layout of `head` (the file's first bytes; `whole`: all of it), the fields in opt.given
+// kept. `read_as` gets the chosen options that differ from format "plain", as the user would
+// type them.
+CsvOptions sniff_layout(std::string_view head, bool whole, const CsvOptions& opt,
+                        const std::string& file, std::string& read_as) {
+  CsvOptions o = opt;
+  const CsvGiven& g = opt.given;
+  // UTF-16 or binary: the reader says what is wrong with it.
+  if (head.substr(0, 2) == "\xFF\xFE" || head.substr(0, 2) == "\xFE\xFF" ||
+      head.substr(0, 4096).find('\0') != std::string_view::npos)
+    return o;
+  const std::vector<std::string_view> lines = head_lines(head, whole);
+  std::vector<std::size_t> used;  // the lines that are neither blank nor comments
+  for (std::size_t i = 0; i < lines.size(); ++i)
+    if (!blank_or_comment(lines[i])) used.push_back(i);
+  if (used.empty()) return o;
+
+  // Delimiter: the one that splits the most lines of the head's second half (data) into the
+  // same number (at least 2) of cells: a truncated row there does not decide it. Ties go to the
+  // earlier in this list (';' before ',' for decimal commas, anything before blanks for
+  // date-time stamps).
+  std::vector<std::string_view> cells;
+  Delimiter delim;
+  bool found = false;
+  std::size_t width = 0;  // cells in a data row
+  if (g.delimiter && opt.delimiter != "auto") {
+    delim = parse_delimiter(opt.delimiter, opt.decimal, file);
+    found = true;
+  } else {
+    std::size_t best = 0;
+    for (const char* spec : {"tab", ";", ",", "|", "space"}) {
+      const Delimiter d = parse_delimiter(spec, '.', file);
+      if (g.decimal && opt.decimal == ',' && d.c == ',' && !d.blanks) continue;
+      Splitter s(d);
+      std::vector<std::size_t> counts;
+      for (std::size_t j = used.size() / 2; j < used.size(); ++j)
+        counts.push_back(split_trimmed(s, lines[used[j]], cells));
+      const auto [k, times] = most_common(counts);
+      if (k >= 2 && times > best) {
+        best = times;
+        delim = d;
+        width = k;
+        found = true;
+      }
+    }
+    if (!found) return o;  // one column: the reader names what it found
+    o.delimiter = delimiter_option(delim);
+  }
+  Splitter split(delim);
+  if (width == 0) {
+    std::vector<std::size_t> counts;
+    for (std::size_t j = used.size() / 2; j < used.size(); ++j)
+      counts.push_back(split_trimmed(split, lines[used[j]], cells));
+    width = most_common(counts).first;
+  }
+
+  // The data: from the first row of `width` cells, at least half numbers and time stamps, that the
+  // next rows (up to 3) continue. A bad row further on stays data, for the reader to name.
+  auto data_like = [&](std::size_t i) {
+    if (split_trimmed(split, lines[i], cells) != width) return false;
+    std::size_t filled = 0, values = 0;
+    for (std::string_view c : cells) {
+      filled += !c.empty();
+      values += is_number(c) || is_time_stamp(c);
+    }
+    return 2 * values >= filled && values > 0;
+  };
+  std::size_t first = kNone;  // index into used
+  for (std::size_t j = 0; j < used.size() && first == kNone; ++j) {
+    bool ok = true;
+    for (std::size_t k = j; k < used.size() && k <= j + 3 && ok; ++k) ok = data_like(used[k]);
+    if (ok) first = j;
+  }
+  if (first == kNone) return o;
+  // The header: the first line of the data's width before it (title lines are narrower), else
+  // the line just before the data; none when the data start at once.
+  std::size_t header = kNone;
+  if (g.skip_lines) {
+    for (std::size_t j = 0; j < used.size() && header == kNone; ++j)
+      if (used[j] >= opt.skip_lines) header = j;
+  } else {
+    for (std::size_t j = 0; j < first && header == kNone; ++j)
+      if (split_trimmed(split, lines[used[j]], cells) == width) header = j;
+    if (header == kNone && first > 0) header = first - 1;
+    if (header != kNone) o.skip_lines = header == 0 ? 0 : used[header];
+  }
+  if (header == kNone || header >= first) return o;
+  // The data start at the first row after the header that is not all text: a malformed row
+  // among the first ones is data, for the reader to name, never skipped.
+  for (std::size_t j = header + 1; j < first; ++j) {
+    split.split(lines[used[j]], kNone, cells);
+    if (!text_row(cells)) {
+      first = j;
+      break;
+    }
+  }
+  if (!g.skip_after_header)
+    o.skip_after_header = header + 1 == first ? 0 : used[first] - used[header] - 1;
+
+  split.split(lines[used[header]], kNone, cells);
+  const std::vector<std::string> names(cells.begin(), cells.end());
+  // Every data row of the head, for the time column and the decimal separator.
+  std::vector<std::vector<std::string>> rows;
+  for (std::size_t j = first; j < used.size(); ++j) {
+    split.split(lines[used[j]], kNone, cells);
+    rows.emplace_back(cells.begin(), cells.end());
+  }
+  auto column_cells = [&](std::size_t c) {
+    std::vector<std::string> out;
+    for (const auto& r : rows)
+      if (c < r.size() && !r[c].empty()) out.push_back(r[c]);
+    return out;
+  };
+
+  if (!g.decimal && delim.c != ',') {
+    std::size_t dots = 0, commas = 0;
+    std::string buf;
+    double v = 0;
+    for (const auto& r : rows)
+      for (const std::string& c : r) {
+        dots += c.find('.') != std::string::npos && parse_number(c, '.', buf, v) == Num::ok;
+        commas += c.find(',') != std::string::npos && parse_number(c, ',', buf, v) == Num::ok;
+      }
+    if (commas > 0 && dots == 0) o.decimal = ',';
+  }
+
+  // Historian tags; plain op/pv/sp names keep today's meaning.
+  auto tag = [&](bool given, std::string& spec, std::string_view plain, const char* flag,
+                 std::initializer_list<std::string_view> suffixes, const char* also) {
+    if (given || has_name(names, plain)) return;
+    const std::vector<std::size_t> hits = tagged(names, suffixes);
+    if (hits.size() == 1) {
+      const std::string& n = names[hits[0]];
+      spec = "*" + n.substr(n.rfind('.'));
+      return;
+    }
+    if (hits.empty()) return;
+    std::vector<std::string_view> shown;
+    for (std::size_t i : hits) shown.push_back(names[i]);
+    std::string ends;
+    for (std::string_view s : suffixes) {
+      if (!ends.empty()) ends += '/';
+      ends += s;
+    }
+    throw DataError(file, used[header] + 1, "",
+                    std::to_string(hits.size()) + " columns end in " + ends + ": " +
+                        list_names(shown) + "; choose one with " + flag + " NAME" + also);
+  };
+  tag(g.op, o.op_column, "op", "--op", {".MV", ".OP", ".OUT"}, "");
+  tag(g.pv, o.pv_column, "pv", "--pv", {".PV"}, "");
+  tag(g.sp, o.sp_column, "sp", "--sp", {".SV", ".SP"}, " (or --sp none)");
+
+  // The time column: t or time by name, else the first column of date-time stamps.
+  std::size_t t_index = kNone;
+  if (!g.t && !has_name(names, "t")) {
+    if (has_name(names, "time")) {
+      o.t_column = "time";
+    } else {
+      for (std::size_t c = 0; c < names.size() && t_index == kNone; ++c)
+        if (!matching_time_formats(column_cells(c)).empty()) t_index = c;
+      if (t_index != kNone) o.t_column = std::to_string(t_index + 1);
+    }
+  }
+  if (!g.time_format && o.t_column != "none") {
+    if (t_index == kNone) {
+      std::vector<std::string_view> views(names.begin(), names.end());
+      Column ct("t", "--t", o.t_column, false);
+      resolve(ct, views, file, used[header] + 1, false);
+      t_index = ct.index;
+    }
+    const std::vector<std::string> stamps =
+        t_index == kNone ? std::vector<std::string>{} : column_cells(t_index);
+    if (!stamps.empty() && !std::all_of(stamps.begin(), stamps.end(),
+                                        [](const std::string& c) { return is_number(c); })) {
+      const std::vector<std::string_view> fmts = matching_time_formats(stamps);
+      if (fmts.size() == 1) o.time_format = std::string(fmts[0]);
+      if (fmts.size() > 1) {
+        std::string choices;
+        for (std::string_view f : fmts) choices += shell_words_sep(choices, f);
+        throw DataError(file, used[first] + 1, names[t_index],
+                        "the time stamps (" + show(stamps.front()) + " to " + show(stamps.back()) +
+                            ") read as day/month and as month/day alike; choose with "
+                            "--time-format " +
+                            choices,
+                        "t");
+      }
+    }
+  }
+
+  // What was chosen, as options; the header-row delimiter detection of "plain" is left out.
+  const std::string_view hl = lines[used[header]];
+  const Delimiter plain_d = detect_delimiter(hl, o.decimal);
+  if (!g.delimiter && (plain_d.blanks != delim.blanks || plain_d.c != delim.c))
+    read_as += " --delimiter " + shell_word(o.delimiter);
+  if (!g.skip_lines && o.skip_lines) read_as += " --skip-lines " + std::to_string(o.skip_lines);
+  if (!g.skip_after_header && o.skip_after_header)
+    read_as += " --skip-after-header " + std::to_string(o.skip_after_header);
+  if (!g.decimal && o.decimal != opt.decimal) read_as += std::string(" --decimal ") + o.decimal;
+  if (!g.time_format && o.time_format != opt.time_format)
+    read_as += " --time-format " + shell_word(o.time_format);
+  if (!g.t && o.t_column != opt.t_column) read_as += " --t " + shell_word(o.t_column);
+  if (!g.op && o.op_column != opt.op_column) read_as += " --op " + shell_word(o.op_column);
+  if (!g.pv && o.pv_column != opt.pv_column) read_as += " --pv " + shell_word(o.pv_column);
+  if (!g.sp && o.sp_column != opt.sp_column) read_as += " --sp " + shell_word(o.sp_column);
+  if (!read_as.empty()) read_as.erase(0, 1);
+  return o;
+}
+
 std::string number_problem(Num r, std::string_view cell, char decimal) {
   switch (r) {
     case Num::empty:
@@ -563,12 +919,49 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
   detail::TimeStamp t0;
   std::string why;
 
+  // A first data row of text (units or descriptions under the header row): the
+  // --skip-after-header that skips it and the text rows after it.
+  auto refuse_text_row = [&](const Column& c, std::string_view cell) {
+    if (!row_line.empty() || !text_row(cells)) return;
+    const std::size_t at = lines.number();
+    const std::string shown = show(cell);  // the line's views end with the next line read
+    std::size_t last_text = at;
+    std::string_view next;
+    std::vector<std::string_view> next_cells;
+    for (std::size_t k = 0; k < kSniffLines && lines.next(next); ++k) {
+      if (blank_or_comment(next)) continue;
+      if (splitter.split(next, kNone, next_cells) != Split::ok || !text_row(next_cells)) break;
+      last_text = lines.number();
+    }
+    throw DataError(file, at, c.name,
+                    shown + " is not data: line " + std::to_string(at) +
+                        " is text (units or descriptions under the header row?); skip the lines "
+                        "up to " +
+                        std::to_string(last_text) + " with --skip-after-header " +
+                        std::to_string(last_text - header_line),
+                    c.role);
+  };
+  // A cell that is no number, with the option that fixes the usual causes: a text row where
+  // the data should start, or a date-time stamp read as seconds.
+  auto number_error = [&](const Column& c, std::string_view cell, Num r) {
+    const std::size_t at = lines.number();
+    if (r == Num::bad || r == Num::empty) refuse_text_row(c, cell);
+    if (&c == &ct && r == Num::bad) {
+      const std::vector<std::string_view> fmts = matching_time_formats({std::string(cell)});
+      if (!fmts.empty()) {
+        std::string choices;
+        for (std::string_view f : fmts) choices += shell_words_sep(choices, f);
+        throw DataError(
+            file, at, c.name,
+            show(cell) + " is a date and time, not seconds: give --time-format " + choices, c.role);
+      }
+    }
+    throw DataError(file, at, c.name, number_problem(r, cell, decimal), c.role);
+  };
   auto cell_number = [&](const Column& c, std::vector<double>& out) {
     double v = 0;
     const Num r = parse_number(cells[c.index], decimal, numbuf, v);
-    if (r != Num::ok)
-      throw DataError(file, lines.number(), c.name, number_problem(r, cells[c.index], decimal),
-                      c.role);
+    if (r != Num::ok) number_error(c, cells[c.index], r);
     if (std::abs(v) > kMaxSignalMagnitude)
       throw DataError(file, lines.number(), c.name, signal_value_problem(v, show(cells[c.index])),
                       c.role);
@@ -615,11 +1008,13 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
       double t = 0;
       if (date_time) {
         detail::TimeStamp ts;
-        if (!detail::parse_time_stamp(cell, time_format, ts, why))
+        if (!detail::parse_time_stamp(cell, time_format, ts, why)) {
+          refuse_text_row(ct, cell);
           throw DataError(file, lines.number(), ct.name,
                           show(cell) + " does not match --time-format " + show(opt.time_format) +
                               " (" + why + ")",
                           ct.role);
+        }
         if (d.t.empty()) {
           t0 = ts;
           first_time.assign(cell);
@@ -627,8 +1022,7 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
         t = static_cast<double>(ts.seconds - t0.seconds) + (ts.fraction - t0.fraction);
       } else {
         const Num r = parse_number(cell, decimal, numbuf, t);
-        if (r != Num::ok)
-          throw DataError(file, lines.number(), ct.name, number_problem(r, cell, decimal), ct.role);
+        if (r != Num::ok) number_error(ct, cell, r);
       }
       if (!d.t.empty() && !(t > d.t.back())) {
         std::string p = "time " + show(cell) + " is not after the previous row's " +
@@ -787,12 +1181,33 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
   return d;
 }
 
+// Format "auto": the sniffed options, and the note that shows them; an error of the reading
+// then says what was sniffed, since the user gave none of it.
+LoopData parse_sniffed(Lines& lines, std::string_view head, bool whole, const CsvOptions& opt,
+                       const std::string& file, std::vector<std::string>* notes) {
+  if (opt.format == "plain") return parse_lines(lines, opt, file, notes);
+  if (opt.format != "auto")
+    throw DataError(file, 0, "", "--format " + show(opt.format) + " is not 'auto' or 'plain'");
+  std::string read_as;
+  const CsvOptions sniffed = sniff_layout(head, whole, opt, file, read_as);
+  if (read_as.empty()) return parse_lines(lines, sniffed, file, notes);
+  if (notes) notes->push_back("read as " + read_as + " (found by --format auto)");
+  try {
+    return parse_lines(lines, sniffed, file, notes);
+  } catch (const DataError& e) {
+    throw DataError::rebuilt(e.file, e.line, e.column,
+                             std::string(e.what()) + " [the layout found by --format auto: " +
+                                 read_as + "; give options to change it]");
+  }
+}
+
 }  // namespace
 
 LoopData parse_loop_csv(std::string_view text, const CsvOptions& options,
                         const std::string& name_for_messages, std::vector<std::string>* notes) {
   Lines lines(text, name_for_messages);
-  return parse_lines(lines, options, name_for_messages, notes);
+  return parse_sniffed(lines, text.substr(0, kSniffBytes), text.size() <= kSniffBytes, options,
+                       name_for_messages, notes);
 }
 
 LoopData read_loop_csv(const std::string& path, const CsvOptions& options,
@@ -807,8 +1222,16 @@ LoopData read_loop_csv(const std::string& path, const CsvOptions& options,
         "cannot open the file: " + std::generic_category().message(errno) + " (check the path)");
   // Read line by line: memory follows the rows kept, not the file's size.
   const std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(f, &std::fclose);
-  Lines lines(f, path);
-  return parse_lines(lines, options, path, notes);
+  // The head read for sniffing is handed on to the reader, so a pipe is read once.
+  std::string head(options.format == "plain" ? 0 : kSniffBytes, '\0');
+  head.resize(std::fread(head.data(), 1, head.size(), f));
+  if (std::ferror(f))
+    throw DataError(path, 0, "",
+                    "reading the file failed: " + std::generic_category().message(errno));
+  const bool whole = head.size() < kSniffBytes;
+  const std::string sniffed_head = options.format == "plain" ? std::string() : head;
+  Lines lines(f, path, std::move(head));
+  return parse_sniffed(lines, sniffed_head, whole, options, path, notes);
 }
 
 }  // namespace valvediag

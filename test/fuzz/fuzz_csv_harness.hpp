@@ -30,7 +30,8 @@ inline CsvOptions options_from(std::string_view& data) {
   if ((a >> 6) & 1) period = (a >> 7) & 1 ? 0.25 : 1.0;
   if (c[0] == std::string_view("none") && !period) period = 0.5;
   // Built in one initializer: g++ 12 warns falsely (-Wrestrict) on assigning short literals.
-  return CsvOptions{.delimiter = kDelimiters[a & 7],
+  return CsvOptions{.format = (b >> 7) & 1 ? "auto" : "plain",  // bit 7: sniff the layout
+                    .delimiter = kDelimiters[a & 7],
                     .skip_lines = b & 3u,
                     .skip_after_header = ((b >> 2) & 1u) * 2,  // 2 as in the plant-loop exports
                     .time_format = kFormats[(a >> 3) & 3],

@@ -182,3 +182,41 @@ TEST_CASE("the export with broken time stamps reads with --t none, and its PV is
           .c_str(),
       DataError);
 }
+
+TEST_CASE("all 41 plant-loop exports read with no options at all (format auto) as with them") {
+  std::vector<fs::path> files = plant_files("stiction");
+  const auto clean = plant_files("no-stiction");
+  files.insert(files.end(), clean.begin(), clean.end());
+  CsvOptions automatic;
+  automatic.format = "auto";
+  std::size_t same = 0;
+  for (const fs::path& p : files) {
+    INFO(p.string());
+    if (p.filename() == kBadStamps) {
+      try {
+        valvediag::read_loop_csv(p.string(), automatic);
+        FAIL("the repeated time stamp was not noticed");
+      } catch (const DataError& e) {
+        CHECK(e.line == 36);
+        CHECK(e.column == "tagname");
+      }
+      continue;
+    }
+    std::vector<std::string> notes;
+    const LoopData a = valvediag::read_loop_csv(p.string(), automatic, &notes);
+    const LoopData b = valvediag::read_loop_csv(p.string(), plant_options());
+    CHECK(a.size() == b.size());
+    CHECK(a.sample_period() == b.sample_period());
+    CHECK(a.t == b.t);
+    CHECK(a.op == b.op);
+    CHECK(a.pv == b.pv);
+    CHECK(a.sp == b.sp);
+    CHECK_FALSE(a.has_mv());
+    REQUIRE(notes.size() == 3);
+    CHECK(notes[0] ==
+          "read as --skip-lines 2 --skip-after-header 2 --time-format '%Y-%m-%d %H:%M:%S' --t 1 "
+          "--op '*.MV' --pv '*.PV' --sp '*.SV' (found by --format auto)");
+    same += a.op == b.op && a.t == b.t;
+  }
+  CHECK(same == 40);
+}
