@@ -578,9 +578,24 @@ class HeDataFit {
   // Sums over the scored rows t0 <= t < N of the products of left's and right's columns into
   // out. A block of rows at a time, so that a column's block is read from memory once and every
   // product is a vectorised dot product in cache.
+  // A product whose mirror (the same two columns the other way round) comes earlier is copied
+  // from it, not summed again: a Gram matrix costs its upper triangle.
   void scored_dots(const Columns& left, const Columns& right, Eigen::MatrixXd& out) const {
     constexpr std::size_t kBlock = 512;
     out.setZero(left.n, right.n);
+    auto same = [](const Column& a, const Column& b) { return a.v == b.v && a.lag == b.lag; };
+    // mirror[i][j] = i' * kMaxColumns + j' of an earlier product of the same pair, or -1.
+    std::array<std::array<int, kMaxColumns>, kMaxColumns> mirror;
+    for (int i = 0; i < left.n; ++i)
+      for (int j = 0; j < right.n; ++j) {
+        mirror[i][j] = -1;
+        for (int i2 = 0; i2 < i && mirror[i][j] < 0; ++i2)
+          for (int j2 = 0; j2 < right.n; ++j2)
+            if (same(left.c[i2], right.c[j]) && same(right.c[j2], left.c[i])) {
+              mirror[i][j] = i2 * kMaxColumns + j2;
+              break;
+            }
+      }
     for (std::size_t t = t0_; t < u_.size(); t += kBlock) {
       const auto len = static_cast<Eigen::Index>(std::min(kBlock, u_.size() - t));
       auto block = [&](const Column& c) {
@@ -588,9 +603,14 @@ class HeDataFit {
       };
       for (int i = 0; i < left.n; ++i)
         for (int j = 0; j < right.n; ++j)
-          out(i, j) += block(left.c[static_cast<std::size_t>(i)])
-                           .dot(block(right.c[static_cast<std::size_t>(j)]));
+          if (mirror[i][j] < 0)
+            out(i, j) += block(left.c[static_cast<std::size_t>(i)])
+                             .dot(block(right.c[static_cast<std::size_t>(j)]));
     }
+    for (int i = 0; i < left.n; ++i)
+      for (int j = 0; j < right.n; ++j)
+        if (mirror[i][j] >= 0)
+          out(i, j) = out(mirror[i][j] / kMaxColumns, mirror[i][j] % kMaxColumns);
   }
   // x through 1/A from rest into f_ and, when the poles changed, the fixed regressors (the
   // constant and the free responses through 1/A) and their sums of products with each other and
