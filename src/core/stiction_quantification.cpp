@@ -641,7 +641,9 @@ class HeDataFit {
       fixed_ready_ = true;
     }
   }
-  // The recursions of x and of the impulse response in one loop: their latencies overlap.
+  // The recursions of x and of the impulse response in one loop: their latencies overlap. For the
+  // unrolled orders the past outputs stay in registers: loading f[t - 1] back from memory put a
+  // store-forwarding delay on the chain, the filter's critical path. Same arithmetic, same order.
   template <int NA, bool kFixed>
   void filter_n(const std::vector<double>& x) const {
     const std::size_t N = x.size();
@@ -656,7 +658,8 @@ class HeDataFit {
     double* h = impulse_.data();
     double* st = step_.data();
     double sum = 0.0;
-    for (std::size_t t = 0; t < N; ++t) {
+    const std::size_t head = NA >= 0 ? std::min(na, N) : N;
+    for (std::size_t t = 0; t < head; ++t) {
       double v = x[t], g = t == 0 ? 1.0 : 0.0;
       const std::size_t k = t >= na ? na : t;
       for (std::size_t i = 1; i <= k; ++i) {
@@ -667,6 +670,35 @@ class HeDataFit {
       if (kFixed) {
         h[t] = g;
         st[t] = sum += g;
+      }
+    }
+    if constexpr (NA >= 0) {
+      // fp[i - 1] = f[t - i], hp[i - 1] = h[t - i].
+      std::array<double, NA + 1> c{}, fp{}, hp{};
+      for (std::size_t i = 0; i < na; ++i) {
+        c[i] = a[i];
+        fp[i] = f[head - 1 - i];
+        if (kFixed) hp[i] = h[head - 1 - i];
+      }
+      for (std::size_t t = head; t < N; ++t) {
+        double v = x[t], g = 0.0;
+        for (std::size_t i = 0; i < na; ++i) {
+          v -= c[i] * fp[i];
+          if (kFixed) g -= c[i] * hp[i];
+        }
+        for (std::size_t i = na; i-- > 1;) {
+          fp[i] = fp[i - 1];
+          if (kFixed) hp[i] = hp[i - 1];
+        }
+        if (na > 0) {
+          fp[0] = v;
+          if (kFixed) hp[0] = g;
+        }
+        f[t] = v;
+        if (kFixed) {
+          h[t] = g;
+          st[t] = sum += g;
+        }
       }
     }
   }
