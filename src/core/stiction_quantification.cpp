@@ -503,7 +503,9 @@ class HeDataFit {
     for (int k = 0; k < fixed.n; ++k)
       all.c[static_cast<std::size_t>(all.n++)] = fixed.c[static_cast<std::size_t>(k)];
     products_.resize(taps.n, all.n);
-    scored_dots(taps, all, products_);
+    tap_gram(taps, products_);
+    scored_dots(taps, fixed, fixed_products_);
+    products_.rightCols(fixed.n) = fixed_products_;
     const Eigen::Index nf = fixed.n - 1;
     const int p = nb_ + static_cast<int>(nf);
     Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxColumns, kMaxColumns> G(p, p);
@@ -611,6 +613,30 @@ class HeDataFit {
       for (int j = 0; j < right.n; ++j)
         if (mirror[i][j] >= 0)
           out(i, j) = out(mirror[i][j] / kMaxColumns, mirror[i][j] % kMaxColumns);
+  }
+  // The taps' products with each other into out's left block. The taps are one series at lags
+  // l_0 < l_1 < ..., so the product of lags l_i <= l_j is the series against itself d = l_j - l_i
+  // back, summed over the scored rows moved back by l_i: one dot product per d, over the rows of
+  // l_0, and the few rows at the two ends where the others' differ.
+  void tap_gram(const Columns& taps, Eigen::MatrixXd& out) const {
+    const double* v = taps.c[0].v;
+    const std::size_t l0 = taps.c[0].lag, N = u_.size();
+    const auto n = static_cast<Eigen::Index>(N - t0_);
+    const Eigen::Map<const Eigen::VectorXd> at_l0(v + (t0_ - l0), n);
+    std::array<double, kMaxColumns> base{};
+    for (int d = 0; d < taps.n; ++d)
+      base[static_cast<std::size_t>(d)] = at_l0.dot(
+          Eigen::Map<const Eigen::VectorXd>(v + (t0_ - l0 - static_cast<std::size_t>(d)), n));
+    for (int i = 0; i < taps.n; ++i)
+      for (int j = i; j < taps.n; ++j) {
+        const std::size_t li = taps.c[static_cast<std::size_t>(i)].lag,
+                          d = taps.c[static_cast<std::size_t>(j)].lag - li;
+        double sum = base[d];
+        // Rows s of the series: l_0's are t0 - l0 .. N - 1 - l0, l_i's e = li - l0 earlier.
+        for (std::size_t s = t0_ - li; s < t0_ - l0; ++s) sum += v[s] * v[s - d];
+        for (std::size_t s = N - li; s < N - l0; ++s) sum -= v[s] * v[s - d];
+        out(i, j) = out(j, i) = sum;
+      }
   }
   // x through 1/A from rest into f_ and, when the poles changed, the fixed regressors (the
   // constant and the free responses through 1/A) and their sums of products with each other and
@@ -753,9 +779,10 @@ class HeDataFit {
   mutable std::vector<double> impulse_, step_;
   mutable Eigen::MatrixXd fixed_gram_;
   mutable bool fixed_ready_ = false;
-  Eigen::MatrixXd y_lags_;            // products of y's lags and 1 (ls_poles)
-  mutable Eigen::MatrixXd products_;  // scratch: B's taps against every column
-  const bool remember_;               // costs_ in use
+  Eigen::MatrixXd y_lags_;                  // products of y's lags and 1 (ls_poles)
+  mutable Eigen::MatrixXd products_;        // scratch: B's taps against every column
+  mutable Eigen::MatrixXd fixed_products_;  // scratch: B's taps against the fixed columns
+  const bool remember_;                     // costs_ in use
   mutable std::unordered_map<std::uint64_t, double> costs_;  // by position fingerprint
   double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
