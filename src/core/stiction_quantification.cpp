@@ -423,18 +423,19 @@ class HeDataFit {
     };
     const double my = mean(y_), mx = mean(x);
     for (int pass = 0; pass < passes; ++pass) {
-      auto through = [&](const std::vector<double>& in, double m, std::vector<double>& out) {
-        out.resize(in.size());
-        for (std::size_t t = 0; t < in.size(); ++t) {
-          double v = in[t] - m;
-          for (std::size_t i = 1; i <= a.size() && i <= t; ++i) v -= a[i - 1] * out[t - i];
-          out[t] = v;
-        }
-      };
-      through(y_, my, sm_y_);
-      through(x, mx, sm_x_);
+      // The first pass starts from the same poles for every x (the Preisach valve's): y through
+      // them is kept.
+      const bool same_y = pass == 0 && sm_y0_valid_ && sm_y0_poles_ == a;
+      if (!same_y) through(y_, my, a, sm_y_);
+      if (pass == 0 && !same_y) {
+        sm_y0_ = sm_y_;
+        sm_y0_poles_ = a;
+        sm_y0_valid_ = true;
+      }
+      const std::vector<double>& fy = pass == 0 ? sm_y0_ : sm_y_;
+      through(x, mx, a, sm_x_);
       Columns c;  // as arx_poles takes them
-      for (int i = 0; i <= na; ++i) c.add(sm_y_, static_cast<std::size_t>(i));
+      for (int i = 0; i <= na; ++i) c.add(fy, static_cast<std::size_t>(i));
       for (int j = 1; j <= nb_; ++j) c.add(sm_x_, static_cast<std::size_t>(nk_ + j));
       c.add(ones_, 0);
       scored_dots(c, c, products_);
@@ -537,6 +538,46 @@ class HeDataFit {
       }
     }
     return std::max(0.0, yy - th.dot(rs));
+  }
+  // `in` less m through 1/A (coefficients a) from rest into out. The common orders keep the past
+  // outputs in registers (see filter_n); the same operations in the same order as the plain loop.
+  static void through(const std::vector<double>& in, double m, const std::vector<double>& a,
+                      std::vector<double>& out) {
+    switch (a.size()) {
+      case 1:
+        return through_n<1>(in, m, a, out);
+      case 2:
+        return through_n<2>(in, m, a, out);
+      case 3:
+        return through_n<3>(in, m, a, out);
+      default:
+        return through_n<-1>(in, m, a, out);
+    }
+  }
+  template <int NA>
+  static void through_n(const std::vector<double>& in, double m, const std::vector<double>& a,
+                        std::vector<double>& out) {
+    const std::size_t N = in.size();
+    out.resize(N);
+    if constexpr (NA < 0) {
+      for (std::size_t t = 0; t < N; ++t) {
+        double v = in[t] - m;
+        for (std::size_t i = 1; i <= a.size() && i <= t; ++i) v -= a[i - 1] * out[t - i];
+        out[t] = v;
+      }
+    } else {
+      constexpr std::size_t na = NA;
+      std::array<double, na> c{}, p{};  // p[i - 1] = out[t - i]
+      for (std::size_t i = 0; i < na; ++i) c[i] = a[i];
+      for (std::size_t t = 0; t < N; ++t) {
+        double v = in[t] - m;
+        const std::size_t k = t < na ? t : na;
+        for (std::size_t i = 0; i < k; ++i) v -= c[i] * p[i];
+        for (std::size_t i = na - 1; i > 0; --i) p[i] = p[i - 1];
+        p[0] = v;
+        out[t] = v;
+      }
+    }
   }
   // Equation-error least squares of y(t) on [-y(t-1) .. -y(t-na), x's taps, 1] from the products
   // P of the columns [y(t), y(t-1) .. y(t-na), x's taps, 1]: A's coefficients, or empty when A
@@ -788,6 +829,9 @@ class HeDataFit {
   double region_lo_ = 0.0, region_width_ = 1.0;
   mutable std::vector<double> x_, f_;        // scratch
   mutable std::vector<double> sm_y_, sm_x_;  // scratch of sm_poles
+  // sm_poles' first pass: y through sm_y0_poles_.
+  mutable std::vector<double> sm_y0_, sm_y0_poles_;
+  mutable bool sm_y0_valid_ = false;
 };
 
 // The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
