@@ -340,8 +340,8 @@ struct Band {
 class HeDataFit {
  public:
   HeDataFit(const HammersteinModel& m, const std::vector<double>& op, const std::vector<double>& y,
-            double width, int max_delay, bool remember)
-      : u_(op), y_(y), ones_(op.size(), 1.0), remember_(remember) {
+            double width, int max_delay, bool remember, bool plain_sums)
+      : u_(op), y_(y), ones_(op.size(), 1.0), remember_(remember), plain_sums_(plain_sums) {
     identity_ = m.block == LinearBlock::Identity;
     if (!identity_) {
       nb_ = std::max<int>(1, static_cast<int>(m.b.size()));
@@ -504,9 +504,13 @@ class HeDataFit {
     for (int k = 0; k < fixed.n; ++k)
       all.c[static_cast<std::size_t>(all.n++)] = fixed.c[static_cast<std::size_t>(k)];
     products_.resize(taps.n, all.n);
-    tap_gram(taps, products_);
-    scored_dots(taps, fixed, fixed_products_);
-    products_.rightCols(fixed.n) = fixed_products_;
+    if (plain_sums_) {
+      scored_dots(taps, all, products_);
+    } else {
+      tap_gram(taps, products_);
+      scored_dots(taps, fixed, fixed_products_);
+      products_.rightCols(fixed.n) = fixed_products_;
+    }
     const Eigen::Index nf = fixed.n - 1;
     const int p = nb_ + static_cast<int>(nf);
     Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxColumns, kMaxColumns> G(p, p);
@@ -824,6 +828,7 @@ class HeDataFit {
   mutable Eigen::MatrixXd products_;        // scratch: B's taps against every column
   mutable Eigen::MatrixXd fixed_products_;  // scratch: B's taps against the fixed columns
   const bool remember_;                     // costs_ in use
+  const bool plain_sums_;                   // the taps' products summed one by one (not tap_gram)
   mutable std::unordered_map<std::uint64_t, double> costs_;  // by position fingerprint
   double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
@@ -1248,7 +1253,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   const std::vector<double> u(op.begin() + from, op.begin() + to);
   const std::vector<double> y(pv.begin() + from, pv.begin() + to);
   HeDataFit fit(model, u, y, q.op_hi - q.op_lo, model.structure.nk + opt.refine_delay_range,
-                opt.reuse_costs);
+                opt.reuse_costs, opt.plain_sums);
   if (!fit.usable()) return q;
 
   const double delta = q.resolution_percent;

@@ -409,6 +409,37 @@ TEST_CASE("the refined figures do not depend on the threads or on remembered cos
   }
 }
 
+// The taps' Gram block from shifted sums (one dot product per lag difference and the window's
+// ends) against every product summed: a wrong end row or lag moves every cost, so the fit and
+// the figures would differ.
+TEST_CASE("the taps' products from shifted sums give the plain sums' figures") {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 3, 3000);
+  FitOptions fo;
+  fo.nb_min = fo.nb_max = 3;  // several taps, so the shifted sums are used
+  const IdentificationResult r = identify(d.op, d.pv, fo);
+  REQUIRE(r.model.b.size() == 3);
+  StictionQuantificationOptions plain;
+  plain.plain_sums = true;
+  const auto a = quantify_stiction(r.model, d.op, d.pv);
+  const auto b = quantify_stiction(r.model, d.op, d.pv, plain);
+  REQUIRE(a.refined);
+  REQUIRE(b.refined);
+  CHECK(a.overall.fs_percent == b.overall.fs_percent);
+  CHECK(a.overall.fd_percent == b.overall.fd_percent);
+  CHECK(a.overall.fit_percent == doctest::Approx(b.overall.fit_percent).epsilon(1e-9));
+  CHECK(a.interval.fs_lo == b.interval.fs_lo);
+  CHECK(a.interval.fs_hi == b.interval.fs_hi);
+  CHECK(a.interval.fd_lo == b.interval.fd_lo);
+  CHECK(a.interval.fd_hi == b.interval.fd_hi);
+  REQUIRE(a.regions.size() == b.regions.size());
+  for (std::size_t i = 0; i < a.regions.size(); ++i) {
+    CHECK(a.regions[i].valid == b.regions[i].valid);
+    if (!a.regions[i].valid) continue;
+    CHECK(a.regions[i].figures.fs_percent == b.regions[i].figures.fs_percent);
+    CHECK(a.regions[i].figures.fd_percent == b.regions[i].figures.fd_percent);
+  }
+}
+
 TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more") {
   // PositionDependentStiction: fs 8, fd 3 below 40 % of travel, fs 3, fd 1 above 60 %
   // (interpolated between), in the fast loop with the OP held low, then high, then low.
