@@ -117,6 +117,10 @@ struct StictionQuantificationOptions {
   // linear part stays. false: every sample and every candidate computed (the benchmark's
   // baseline; the same figures).
   bool reuse_costs = true;
+  // B's taps' products with each other summed one by one, as every other product (the reference
+  // the tests hold the fast path to); false: from one dot product per lag difference and the
+  // window's ends (the same figures, the costs to rounding).
+  bool plain_sums = false;
   // Worker threads for the refinement's grid and polish (0: all cores); the figures do not
   // depend on it.
   int threads = 0;

@@ -340,8 +340,8 @@ struct Band {
 class HeDataFit {
  public:
   HeDataFit(const HammersteinModel& m, const std::vector<double>& op, const std::vector<double>& y,
-            double width, int max_delay, bool remember)
-      : u_(op), y_(y), ones_(op.size(), 1.0), remember_(remember) {
+            double width, int max_delay, bool remember, bool plain_sums)
+      : u_(op), y_(y), ones_(op.size(), 1.0), remember_(remember), plain_sums_(plain_sums) {
     identity_ = m.block == LinearBlock::Identity;
     if (!identity_) {
       nb_ = std::max<int>(1, static_cast<int>(m.b.size()));
@@ -423,18 +423,19 @@ class HeDataFit {
     };
     const double my = mean(y_), mx = mean(x);
     for (int pass = 0; pass < passes; ++pass) {
-      auto through = [&](const std::vector<double>& in, double m, std::vector<double>& out) {
-        out.resize(in.size());
-        for (std::size_t t = 0; t < in.size(); ++t) {
-          double v = in[t] - m;
-          for (std::size_t i = 1; i <= a.size() && i <= t; ++i) v -= a[i - 1] * out[t - i];
-          out[t] = v;
-        }
-      };
-      through(y_, my, sm_y_);
-      through(x, mx, sm_x_);
+      // The first pass starts from the same poles for every x (the Preisach valve's): y through
+      // them is kept.
+      const bool same_y = pass == 0 && sm_y0_valid_ && sm_y0_poles_ == a;
+      if (!same_y) through(y_, my, a, sm_y_);
+      if (pass == 0 && !same_y) {
+        sm_y0_ = sm_y_;
+        sm_y0_poles_ = a;
+        sm_y0_valid_ = true;
+      }
+      const std::vector<double>& fy = pass == 0 ? sm_y0_ : sm_y_;
+      through(x, mx, a, sm_x_);
       Columns c;  // as arx_poles takes them
-      for (int i = 0; i <= na; ++i) c.add(sm_y_, static_cast<std::size_t>(i));
+      for (int i = 0; i <= na; ++i) c.add(fy, static_cast<std::size_t>(i));
       for (int j = 1; j <= nb_; ++j) c.add(sm_x_, static_cast<std::size_t>(nk_ + j));
       c.add(ones_, 0);
       scored_dots(c, c, products_);
@@ -503,7 +504,13 @@ class HeDataFit {
     for (int k = 0; k < fixed.n; ++k)
       all.c[static_cast<std::size_t>(all.n++)] = fixed.c[static_cast<std::size_t>(k)];
     products_.resize(taps.n, all.n);
-    scored_dots(taps, all, products_);
+    if (plain_sums_) {
+      scored_dots(taps, all, products_);
+    } else {
+      tap_gram(taps, products_);
+      scored_dots(taps, fixed, fixed_products_);
+      products_.rightCols(fixed.n) = fixed_products_;
+    }
     const Eigen::Index nf = fixed.n - 1;
     const int p = nb_ + static_cast<int>(nf);
     Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxColumns, kMaxColumns> G(p, p);
@@ -535,6 +542,46 @@ class HeDataFit {
       }
     }
     return std::max(0.0, yy - th.dot(rs));
+  }
+  // `in` less m through 1/A (coefficients a) from rest into out. The common orders keep the past
+  // outputs in registers (see filter_n); the same operations in the same order as the plain loop.
+  static void through(const std::vector<double>& in, double m, const std::vector<double>& a,
+                      std::vector<double>& out) {
+    switch (a.size()) {
+      case 1:
+        return through_n<1>(in, m, a, out);
+      case 2:
+        return through_n<2>(in, m, a, out);
+      case 3:
+        return through_n<3>(in, m, a, out);
+      default:
+        return through_n<-1>(in, m, a, out);
+    }
+  }
+  template <int NA>
+  static void through_n(const std::vector<double>& in, double m, const std::vector<double>& a,
+                        std::vector<double>& out) {
+    const std::size_t N = in.size();
+    out.resize(N);
+    if constexpr (NA < 0) {
+      for (std::size_t t = 0; t < N; ++t) {
+        double v = in[t] - m;
+        for (std::size_t i = 1; i <= a.size() && i <= t; ++i) v -= a[i - 1] * out[t - i];
+        out[t] = v;
+      }
+    } else {
+      constexpr std::size_t na = NA;
+      std::array<double, na> c{}, p{};  // p[i - 1] = out[t - i]
+      for (std::size_t i = 0; i < na; ++i) c[i] = a[i];
+      for (std::size_t t = 0; t < N; ++t) {
+        double v = in[t] - m;
+        const std::size_t k = t < na ? t : na;
+        for (std::size_t i = 0; i < k; ++i) v -= c[i] * p[i];
+        for (std::size_t i = na - 1; i > 0; --i) p[i] = p[i - 1];
+        p[0] = v;
+        out[t] = v;
+      }
+    }
   }
   // Equation-error least squares of y(t) on [-y(t-1) .. -y(t-na), x's taps, 1] from the products
   // P of the columns [y(t), y(t-1) .. y(t-na), x's taps, 1]: A's coefficients, or empty when A
@@ -578,9 +625,24 @@ class HeDataFit {
   // Sums over the scored rows t0 <= t < N of the products of left's and right's columns into
   // out. A block of rows at a time, so that a column's block is read from memory once and every
   // product is a vectorised dot product in cache.
+  // A product whose mirror (the same two columns the other way round) comes earlier is copied
+  // from it, not summed again: a Gram matrix costs its upper triangle.
   void scored_dots(const Columns& left, const Columns& right, Eigen::MatrixXd& out) const {
     constexpr std::size_t kBlock = 512;
     out.setZero(left.n, right.n);
+    auto same = [](const Column& a, const Column& b) { return a.v == b.v && a.lag == b.lag; };
+    // mirror[i][j] = i' * kMaxColumns + j' of an earlier product of the same pair, or -1.
+    std::array<std::array<int, kMaxColumns>, kMaxColumns> mirror;
+    for (int i = 0; i < left.n; ++i)
+      for (int j = 0; j < right.n; ++j) {
+        mirror[i][j] = -1;
+        for (int i2 = 0; i2 < i && mirror[i][j] < 0; ++i2)
+          for (int j2 = 0; j2 < right.n; ++j2)
+            if (same(left.c[i2], right.c[j]) && same(right.c[j2], left.c[i])) {
+              mirror[i][j] = i2 * kMaxColumns + j2;
+              break;
+            }
+      }
     for (std::size_t t = t0_; t < u_.size(); t += kBlock) {
       const auto len = static_cast<Eigen::Index>(std::min(kBlock, u_.size() - t));
       auto block = [&](const Column& c) {
@@ -588,9 +650,38 @@ class HeDataFit {
       };
       for (int i = 0; i < left.n; ++i)
         for (int j = 0; j < right.n; ++j)
-          out(i, j) += block(left.c[static_cast<std::size_t>(i)])
-                           .dot(block(right.c[static_cast<std::size_t>(j)]));
+          if (mirror[i][j] < 0)
+            out(i, j) += block(left.c[static_cast<std::size_t>(i)])
+                             .dot(block(right.c[static_cast<std::size_t>(j)]));
     }
+    for (int i = 0; i < left.n; ++i)
+      for (int j = 0; j < right.n; ++j)
+        if (mirror[i][j] >= 0)
+          out(i, j) = out(mirror[i][j] / kMaxColumns, mirror[i][j] % kMaxColumns);
+  }
+  // The taps' products with each other into out's left block. The taps are one series at lags
+  // l_0 < l_1 < ..., so the product of lags l_i <= l_j is the series against itself d = l_j - l_i
+  // back, summed over the scored rows moved back by l_i: one dot product per d, over the rows of
+  // l_0, and the few rows at the two ends where the others' differ.
+  void tap_gram(const Columns& taps, Eigen::MatrixXd& out) const {
+    const double* v = taps.c[0].v;
+    const std::size_t l0 = taps.c[0].lag, N = u_.size();
+    const auto n = static_cast<Eigen::Index>(N - t0_);
+    const Eigen::Map<const Eigen::VectorXd> at_l0(v + (t0_ - l0), n);
+    std::array<double, kMaxColumns> base{};
+    for (int d = 0; d < taps.n; ++d)
+      base[static_cast<std::size_t>(d)] = at_l0.dot(
+          Eigen::Map<const Eigen::VectorXd>(v + (t0_ - l0 - static_cast<std::size_t>(d)), n));
+    for (int i = 0; i < taps.n; ++i)
+      for (int j = i; j < taps.n; ++j) {
+        const std::size_t li = taps.c[static_cast<std::size_t>(i)].lag,
+                          d = taps.c[static_cast<std::size_t>(j)].lag - li;
+        double sum = base[d];
+        // Rows s of the series: l_0's are t0 - l0 .. N - 1 - l0, l_i's e = li - l0 earlier.
+        for (std::size_t s = t0_ - li; s < t0_ - l0; ++s) sum += v[s] * v[s - d];
+        for (std::size_t s = N - li; s < N - l0; ++s) sum -= v[s] * v[s - d];
+        out(i, j) = out(j, i) = sum;
+      }
   }
   // x through 1/A from rest into f_ and, when the poles changed, the fixed regressors (the
   // constant and the free responses through 1/A) and their sums of products with each other and
@@ -621,7 +712,9 @@ class HeDataFit {
       fixed_ready_ = true;
     }
   }
-  // The recursions of x and of the impulse response in one loop: their latencies overlap.
+  // The recursions of x and of the impulse response in one loop: their latencies overlap. For the
+  // unrolled orders the past outputs stay in registers: loading f[t - 1] back from memory put a
+  // store-forwarding delay on the chain, the filter's critical path. Same arithmetic, same order.
   template <int NA, bool kFixed>
   void filter_n(const std::vector<double>& x) const {
     const std::size_t N = x.size();
@@ -636,7 +729,8 @@ class HeDataFit {
     double* h = impulse_.data();
     double* st = step_.data();
     double sum = 0.0;
-    for (std::size_t t = 0; t < N; ++t) {
+    const std::size_t head = NA >= 0 ? std::min(na, N) : N;
+    for (std::size_t t = 0; t < head; ++t) {
       double v = x[t], g = t == 0 ? 1.0 : 0.0;
       const std::size_t k = t >= na ? na : t;
       for (std::size_t i = 1; i <= k; ++i) {
@@ -647,6 +741,35 @@ class HeDataFit {
       if (kFixed) {
         h[t] = g;
         st[t] = sum += g;
+      }
+    }
+    if constexpr (NA >= 0) {
+      // fp[i - 1] = f[t - i], hp[i - 1] = h[t - i].
+      std::array<double, NA + 1> c{}, fp{}, hp{};
+      for (std::size_t i = 0; i < na; ++i) {
+        c[i] = a[i];
+        fp[i] = f[head - 1 - i];
+        if (kFixed) hp[i] = h[head - 1 - i];
+      }
+      for (std::size_t t = head; t < N; ++t) {
+        double v = x[t], g = 0.0;
+        for (std::size_t i = 0; i < na; ++i) {
+          v -= c[i] * fp[i];
+          if (kFixed) g -= c[i] * hp[i];
+        }
+        for (std::size_t i = na; i-- > 1;) {
+          fp[i] = fp[i - 1];
+          if (kFixed) hp[i] = hp[i - 1];
+        }
+        if (na > 0) {
+          fp[0] = v;
+          if (kFixed) hp[0] = g;
+        }
+        f[t] = v;
+        if (kFixed) {
+          h[t] = g;
+          st[t] = sum += g;
+        }
       }
     }
   }
@@ -701,14 +824,19 @@ class HeDataFit {
   mutable std::vector<double> impulse_, step_;
   mutable Eigen::MatrixXd fixed_gram_;
   mutable bool fixed_ready_ = false;
-  Eigen::MatrixXd y_lags_;            // products of y's lags and 1 (ls_poles)
-  mutable Eigen::MatrixXd products_;  // scratch: B's taps against every column
-  const bool remember_;               // costs_ in use
+  Eigen::MatrixXd y_lags_;                  // products of y's lags and 1 (ls_poles)
+  mutable Eigen::MatrixXd products_;        // scratch: B's taps against every column
+  mutable Eigen::MatrixXd fixed_products_;  // scratch: B's taps against the fixed columns
+  const bool remember_;                     // costs_ in use
+  const bool plain_sums_;                   // the taps' products summed one by one (not tap_gram)
   mutable std::unordered_map<std::uint64_t, double> costs_;  // by position fingerprint
   double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
   mutable std::vector<double> x_, f_;        // scratch
   mutable std::vector<double> sm_y_, sm_x_;  // scratch of sm_poles
+  // sm_poles' first pass: y through sm_y0_poles_.
+  mutable std::vector<double> sm_y0_, sm_y0_poles_;
+  mutable bool sm_y0_valid_ = false;
 };
 
 // The poles for a fixed valve position x: Nelder-Mead over A's coefficients (unstable A rejected),
@@ -1125,7 +1253,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
   const std::vector<double> u(op.begin() + from, op.begin() + to);
   const std::vector<double> y(pv.begin() + from, pv.begin() + to);
   HeDataFit fit(model, u, y, q.op_hi - q.op_lo, model.structure.nk + opt.refine_delay_range,
-                opt.reuse_costs);
+                opt.reuse_costs, opt.plain_sums);
   if (!fit.usable()) return q;
 
   const double delta = q.resolution_percent;

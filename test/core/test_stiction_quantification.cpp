@@ -43,6 +43,23 @@ bool within(double est, double truth) {
   return std::abs(est - truth) <= std::max(0.5, 0.2 * std::abs(truth));
 }
 
+// The same refined figures: overall, their interval's ends, and every visited region's.
+void check_same_figures(const StictionQuantification& a, const StictionQuantification& b) {
+  CHECK(a.overall.fs_percent == b.overall.fs_percent);
+  CHECK(a.overall.fd_percent == b.overall.fd_percent);
+  CHECK(a.interval.fs_lo == b.interval.fs_lo);
+  CHECK(a.interval.fs_hi == b.interval.fs_hi);
+  CHECK(a.interval.fd_lo == b.interval.fd_lo);
+  CHECK(a.interval.fd_hi == b.interval.fd_hi);
+  REQUIRE(a.regions.size() == b.regions.size());
+  for (std::size_t i = 0; i < a.regions.size(); ++i) {
+    CHECK(a.regions[i].valid == b.regions[i].valid);
+    if (!a.regions[i].valid) continue;
+    CHECK(a.regions[i].figures.fs_percent == b.regions[i].figures.fs_percent);
+    CHECK(a.regions[i].figures.fd_percent == b.regions[i].figures.fd_percent);
+  }
+}
+
 }  // namespace
 
 TEST_CASE("He's Preisach weights give back He's fs and fd") {
@@ -391,22 +408,29 @@ TEST_CASE("the refined figures do not depend on the threads or on remembered cos
   for (const auto& b : {quantify_stiction(r.model, d.op, d.pv, three),
                         quantify_stiction(r.model, d.op, d.pv, every)}) {
 #endif
-    CHECK(b.overall.fs_percent == a.overall.fs_percent);
-    CHECK(b.overall.fd_percent == a.overall.fd_percent);
+    check_same_figures(b, a);
     CHECK(b.overall.fit_percent == a.overall.fit_percent);
-    CHECK(b.interval.fs_lo == a.interval.fs_lo);
-    CHECK(b.interval.fs_hi == a.interval.fs_hi);
-    CHECK(b.interval.fd_lo == a.interval.fd_lo);
-    CHECK(b.interval.fd_hi == a.interval.fd_hi);
     CHECK(b.interval.points == a.interval.points);
-    REQUIRE(b.regions.size() == a.regions.size());
-    for (std::size_t i = 0; i < a.regions.size(); ++i) {
-      CHECK(b.regions[i].valid == a.regions[i].valid);
-      if (!a.regions[i].valid) continue;
-      CHECK(b.regions[i].figures.fs_percent == a.regions[i].figures.fs_percent);
-      CHECK(b.regions[i].figures.fd_percent == a.regions[i].figures.fd_percent);
-    }
   }
+}
+
+// The taps' Gram block from shifted sums (one dot product per lag difference and the window's
+// ends) against every product summed: a wrong end row or lag moves every cost, so the fit and
+// the figures would differ.
+TEST_CASE("the taps' products from shifted sums give the plain sums' figures") {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 3, 3000);
+  FitOptions fo;
+  fo.nb_min = fo.nb_max = 3;  // several taps, so the shifted sums are used
+  const IdentificationResult r = identify(d.op, d.pv, fo);
+  REQUIRE(r.model.b.size() == 3);
+  StictionQuantificationOptions plain;
+  plain.plain_sums = true;
+  const auto a = quantify_stiction(r.model, d.op, d.pv);
+  const auto b = quantify_stiction(r.model, d.op, d.pv, plain);
+  REQUIRE(a.refined);
+  REQUIRE(b.refined);
+  check_same_figures(a, b);
+  CHECK(a.overall.fit_percent == doctest::Approx(b.overall.fit_percent).epsilon(1e-9));
 }
 
 TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more") {
