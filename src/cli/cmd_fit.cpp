@@ -221,7 +221,8 @@ void add_fit(CLI::App& app, int& exit_code) {
       ->group(g_m)
       ->capture_default_str();
   cmd->add_option("--normalization", a->normalization,
-                  "nonnegative (gain sign in b) or paper-sign (the paper's: the sign of b's first nonzero tap goes into the weights)")
+                  "nonnegative (gain sign in b) or paper-sign (the paper's: the sign of b's first "
+                  "nonzero tap goes into the weights)")
       ->check(CLI::IsMember({"nonnegative", "paper-sign"}))
       ->group(g_m)
       ->capture_default_str();
