@@ -423,14 +423,16 @@ TEST_CASE("the taps' products from shifted sums give the plain sums' figures") {
   fo.nb_min = fo.nb_max = 3;  // several taps, so the shifted sums are used
   const IdentificationResult r = identify(d.op, d.pv, fo);
   REQUIRE(r.model.b.size() == 3);
+  const auto a = quantify_stiction(r.model, d.op, d.pv);
+  REQUIRE(a.refined);
+#ifndef VALVEDIAG_SANITIZED  // sanitized, the shifted sums run once (a); comparing is for Release
   StictionQuantificationOptions plain;
   plain.plain_sums = true;
-  const auto a = quantify_stiction(r.model, d.op, d.pv);
   const auto b = quantify_stiction(r.model, d.op, d.pv, plain);
-  REQUIRE(a.refined);
   REQUIRE(b.refined);
   check_same_figures(a, b);
   CHECK(a.overall.fit_percent == doctest::Approx(b.overall.fit_percent).epsilon(1e-9));
+#endif
 }
 
 TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more") {
