@@ -62,10 +62,29 @@ struct DiagnoseOptions {
   double time_origin_s = 0.0;
 };
 
+// What a step's trial fits are judged on against its model. A self-regulating model: the
+// simulated output (fitness on the estimation and the held-out part). An integrating one: its
+// simulated output's error grows without bound from any rate error (measured: -534 % held out for
+// the true model of an integrating loop, and gains of hundreds of points deciding rankings), so
+// every fit of the step predicts the output `horizon` samples ahead from the measured output
+// (MATLAB's compare(data, model, k)), with the output offset of each `interval` taken from the
+// interval before, on the same samples. Finding's gains are then these fitnesses' gains; the
+// simulated-output fitnesses stay reported.
+struct KStepJudge {
+  std::size_t horizon = 0;         // samples ahead; 0: the simulated output judges
+  std::size_t interval = 0;        // the output offset's interval, samples
+  std::size_t from = 0;            // the first sample with an interval of past
+  std::size_t estimation_end = 0;  // the held-out part starts here
+  double sample_period_s = 0.0;
+  double model_fitness_percent = std::numeric_limits<double>::quiet_NaN();  // estimation part
+  double model_validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();
+};
+
 struct DiagnosisStep {
   ModelFit fit;                   // the model at this step
   ResidualAnalysis residual;      // where it fails
   std::vector<Finding> findings;  // ranked, most likely missing first
+  KStepJudge judge;               // what the findings' gains measure
 };
 
 struct Diagnosis {
@@ -97,6 +116,10 @@ ModelSpec verdict_model(const Diagnosis& d);
 // from predicted slips (Finding::held_valve_validation_fitness_percent): one sentence saying how
 // much, for the reports; "" otherwise.
 std::string held_valve_note(const Finding& f);
+
+// What a step's gains measure, in one sentence for the reports: "" when the simulated output
+// judges; otherwise the k-step judge's horizon and why.
+std::string judge_note(const DiagnosisStep& s);
 
 // The model-fit options every fit of a diagnosis uses (DiagnoseOptions::fit with its held-out
 // share), for callers that re-examine its fits (band_interval).

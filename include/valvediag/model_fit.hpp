@@ -123,6 +123,14 @@ std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double
 // the controller compensates does too; what it gains over this, its predicted slips explain.
 double held_valve_validation_fitness(const ModelFit& fit, const std::vector<double>& y);
 
+// The fit's k-step-ahead prediction of the output (MATLAB's compare(data, model, k)): y(t) from
+// the measured output up to t - k and the simulated valve position, through the fitted linear
+// part; an integrating fit starts from the measured level at t - k. The load is `load` when given
+// (a series as long as y), else the fit's. Samples before the fit's first sample plus k keep the
+// simulated output. Empty when the fit has no linear part.
+std::vector<double> k_step_output(const ModelFit& fit, const std::vector<double>& y, std::size_t k,
+                                  const std::vector<double>* load = nullptr);
+
 // How well the data fix a fitted friction effect's band (`effect` "stiction": He's fs, Kano's S,
 // Stenman's d; "deadband": d): its profile-likelihood interval. A band is inside when, with the
 // chain's other valve parameters re-fitted, N_eff ln(SSE / best SSE) <= 3.84 (chi-square with one

@@ -15,6 +15,17 @@
 
 namespace valvediag {
 
+std::string judge_note(const DiagnosisStep& s) {
+  const KStepJudge& j = s.judge;
+  if (j.horizon == 0) return "";
+  return strprintf(
+      "gains are of %zu-step-ahead prediction (%.3g s) from the measured PV: the model "
+      "integrates, so its simulated PV drifts with any rate error; so judged, the model fits "
+      "%.1f %% (estimation) and %.1f %% (held out)",
+      j.horizon, static_cast<double>(j.horizon) * j.sample_period_s, j.model_fitness_percent,
+      j.model_validation_fitness_percent);
+}
+
 ModelFitOptions fit_options(const DiagnoseOptions& opt) {
   ModelFitOptions fo = opt.fit;
   if (fo.validation_fraction <= 0 && fo.validation_start == 0)
@@ -171,6 +182,56 @@ double chi_square_quantile_99(double k) {
   return k * std::pow(1.0 - c + z * std::sqrt(c), 3.0);
 }
 
+// The output's own horizon: the first lag at which its autocorrelation over [from, to) falls to
+// 0.5, where y(t - k) predicts y(t) no better than its mean; beyond it a model must carry the
+// prediction from the valve. At most an eighth of the span.
+std::size_t output_horizon(const std::vector<double>& y, std::size_t from, std::size_t to) {
+  const std::size_t span = to > from ? to - from : 0;
+  std::size_t horizon = std::max<std::size_t>(span / 8, 1);
+  if (span <= 2) return horizon;
+  const std::vector<double> seg(y.begin() + static_cast<std::ptrdiff_t>(from),
+                                y.begin() + static_cast<std::ptrdiff_t>(to));
+  const std::vector<double> r = autocorrelation(seg);
+  for (std::size_t k = 1; k < r.size() && k < horizon; ++k)
+    if (r[k] <= 0.5) return k;
+  return horizon;
+}
+
+// Fitness of the k-step-ahead prediction (k_step_output) with the output offset of each interval
+// taken from the interval before, on the estimation part past the first interval and on the
+// held-out part: every fit of a step on the same information and the same samples.
+struct KStepFitness {
+  double estimation = std::numeric_limits<double>::quiet_NaN();
+  double validation = std::numeric_limits<double>::quiet_NaN();
+};
+KStepFitness k_step_fitness(const ModelFit& f, const std::vector<double>& y, const KStepJudge& j) {
+  KStepFitness r;
+  const std::size_t e0 = j.estimation_end, from = j.from, h = j.horizon;
+  if (f.estimation_end != e0 || from + h + 1 >= e0 || j.interval == 0) return r;
+  // A fitted load counts by its mean level: its knots are fitted to the estimation part, and
+  // the load ahead is the offset below, for every model alike.
+  std::vector<double> load;
+  if (f.disturbance.size() == y.size() && f.estimation_end > f.first_sample) {
+    double m = 0;
+    for (std::size_t t = f.first_sample; t < f.estimation_end; ++t) m += f.disturbance[t];
+    load.assign(y.size(), m / static_cast<double>(f.estimation_end - f.first_sample));
+  }
+  auto yk = k_step_output(f, y, h, load.empty() ? nullptr : &load);
+  if (yk.size() != y.size()) return r;
+  // An unmeasured load on the output: the mean error of the interval before.
+  std::vector<double> offset(y.size(), 0.0);
+  for (std::size_t a0 = from; a0 < y.size(); a0 += j.interval) {
+    double m = 0;
+    for (std::size_t t = a0 - j.interval; t < a0; ++t) m += y[t] - yk[t];
+    m /= static_cast<double>(j.interval);
+    for (std::size_t t = a0; t < std::min(y.size(), a0 + j.interval); ++t) offset[t] = m;
+  }
+  for (std::size_t t = from; t < y.size(); ++t) yk[t] += offset[t];
+  r.estimation = fitness_percent(y, yk, from + h, e0);
+  if (e0 < y.size()) r.validation = fitness_percent(y, yk, e0, y.size());
+  return r;
+}
+
 DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                        const ModelSpec& model, const DiagnoseOptions& opt) {
   const ModelFitOptions fo = fit_options(opt);
@@ -256,6 +317,27 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     }
   const double base_val = finite_or(step.fit.validation_fitness_percent, 0.0);
   const double base_est = finite_or(step.fit.fitness_percent, 0.0);
+  double base_score = base_est;  // what the model leaves, as the findings' gains are measured
+  // An integrating model: every fit of the step judged on k-step-ahead prediction (KStepJudge).
+  if (step.fit.integrating && step.fit.y_sim.size() == y.size()) {
+    KStepJudge j;
+    j.estimation_end = step.fit.estimation_end;
+    j.sample_period_s = Ts;
+    std::size_t first = step.fit.first_sample;
+    for (const auto& t : fits) first = std::max(first, t.first_sample);
+    const std::size_t span = j.estimation_end > first ? j.estimation_end - first : 0;
+    j.interval = fo.disturbance_knot_spacing > 0 ? fo.disturbance_knot_spacing
+                                                 : std::max<std::size_t>(30, span / 16);
+    j.horizon = output_horizon(y, first, j.estimation_end);
+    j.from = first + j.interval;
+    const KStepFitness m = k_step_fitness(step.fit, y, j);
+    if (std::isfinite(m.estimation)) {
+      j.model_fitness_percent = m.estimation;
+      j.model_validation_fitness_percent = m.validation;
+      step.judge = j;
+      base_score = m.estimation;
+    }
+  }
   for (std::size_t i = 0; i < fits.size(); ++i) {
     const ModelFit& t = fits[i];
     Finding f;
@@ -267,6 +349,13 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     f.validation_gain_percent = finite_or(t.validation_fitness_percent, -1e9) - base_val;
     for (const auto& e : t.effects)
       if (e.name == f.effect) f.parameters = e.parameters;
+    if (step.judge.horizon > 0) {
+      const KStepFitness k = k_step_fitness(t, y, step.judge);
+      f.estimation_gain_percent = finite_or(k.estimation, -1e9) - step.judge.model_fitness_percent;
+      if (std::isfinite(step.judge.model_validation_fitness_percent))
+        f.validation_gain_percent =
+            finite_or(k.validation, -1e9) - step.judge.model_validation_fitness_percent;
+    }
     const bool on_stiction = f.effect == "preisach" && after_stiction.has_value();
     const ResidualAnalysis& ra = on_stiction ? *after_stiction : step.residual;
     // A residual that is mostly white noise cannot point far: the tests' scores count in
@@ -290,7 +379,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     // predicts there (reported, not scored: see held_valve_note).
     if (is_memory_effect(f.effect))
       f.held_valve_validation_fitness_percent = held_valve_validation_fitness(t, y);
-    const double rel = f.gain_percent / std::max(100.0 - base_est, 1.0);
+    const double rel = f.gain_percent / std::max(100.0 - base_score, 1.0);
     f.score = f.gain_percent > 0 ? 0.6 * std::clamp(rel / 0.3, 0.0, 1.0) + 0.4 * f.evidence
                                  : 0.15 * f.evidence;
     f.supported = f.score >= opt.min_score && f.gain_percent >= opt.min_gain_percent;
@@ -330,7 +419,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       const double nest = std::max(nf.estimation_gain_percent, 0.0);
       const double beyond =
           std::min(pr->validation_gain_percent - nval, pr->estimation_gain_percent - nest);
-      const double left = std::max(100.0 - base_est - nest, 1.0);
+      const double left = std::max(100.0 - base_score - nest, 1.0);
       if (beyond <= 0) {
         pr->evidence = 0.0;
         pr->evidence_test.clear();
@@ -378,10 +467,11 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     return (is_memory_effect(a) && b == "disturbance") ||
            (is_memory_effect(b) && a == "disturbance");
   };
-  const auto ranks_above = [margin, base_est, &size, &mutual](const Finding& a, const Finding& b) {
+  const auto ranks_above = [margin, base_score, &size, &mutual](const Finding& a,
+                                                                const Finding& b) {
     const double hi = std::max(a.gain_percent, b.gain_percent);
     const double lo = std::min(a.gain_percent, b.gain_percent);
-    const double left = std::max(100.0 - base_est - lo, 0.0);
+    const double left = std::max(100.0 - base_score - lo, 0.0);
     // Clearly more only when not less on either part of the record: the
     // smaller of the two gains hides a trial that loses far on the other.
     const Finding& more = a.gain_percent > b.gain_percent ? a : b;

@@ -1055,4 +1055,39 @@ std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector
   return out;
 }
 
+std::vector<double> k_step_output(const ModelFit& fit, const std::vector<double>& y, std::size_t k,
+                                  const std::vector<double>* load_series) {
+  const std::size_t N = y.size();
+  if (k == 0 || fit.y_sim.size() != N || fit.x_hat.size() != N || fit.structure.nk < 0) return {};
+  if (load_series && load_series->size() != N) return {};
+  const std::size_t na = fit.a.size(), nb = fit.b.size();
+  const std::size_t nk = static_cast<std::size_t>(fit.structure.nk);
+  const std::size_t lag = std::max(na, nk + nb);
+  const std::vector<double>* load = load_series                   ? load_series
+                                    : fit.disturbance.size() == N ? &fit.disturbance
+                                                                  : nullptr;
+  std::vector<double> v(y);  // the measured output (differenced if integrating)
+  if (fit.integrating) {
+    for (std::size_t t = N - 1; t >= 1; --t) v[t] = y[t] - y[t - 1];
+    v[0] = 0.0;
+  }
+  std::vector<double> out = fit.y_sim, p(k);
+  const std::size_t first = std::max(fit.first_sample, lag + 1) + k;
+  for (std::size_t t = first; t < N; ++t) {
+    const std::size_t s = t - k;  // measured up to s
+    double level = fit.integrating ? y[s] : 0.0;
+    for (std::size_t j = 1; j <= k; ++j) {
+      const std::size_t tt = s + j;
+      double pv = load ? (*load)[tt] : fit.c;
+      for (std::size_t i = 1; i <= na; ++i)
+        pv -= fit.a[i - 1] * (tt - i <= s ? v[tt - i] : p[tt - i - s - 1]);
+      for (std::size_t m = 1; m <= nb; ++m) pv += fit.b[m - 1] * fit.x_hat[tt - nk - m];
+      p[j - 1] = pv;
+      level += pv;
+    }
+    out[t] = fit.integrating ? level : p[k - 1];
+  }
+  return out;
+}
+
 }  // namespace valvediag

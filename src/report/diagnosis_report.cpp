@@ -56,6 +56,7 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   else
     o << "residual:  RMS " << num(s.residual.rms, 3) << ", white-noise level "
       << num(s.residual.noise_level, 3) << "\n";
+  if (const std::string jn = judge_note(s); !jn.empty()) o << "judge:     " << jn << "\n";
   o << "findings (most likely missing first):\n";
   o << "  rank  effect          score  gain (val / est)      evidence\n";
   int rank = 0;
@@ -269,6 +270,11 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
                         {"trial_model", to_string(f.trial_spec)}});
   }
   j["findings"] = findings;
+  j["judge"] = {
+      {"kind", s.judge.horizon > 0 ? "k-step" : "simulated-output"},
+      {"horizon_samples", s.judge.horizon},
+      {"model_fitness_percent", num_json(s.judge.model_fitness_percent)},
+      {"model_validation_fitness_percent", num_json(s.judge.model_validation_fitness_percent)}};
   json ladder = json::array();
   for (const auto& st : d.steps)
     ladder.push_back({{"model", to_string(st.fit.spec)},

@@ -842,6 +842,7 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
     << e(num(s.fit.validation_fitness_percent)) << " % validation. Each effect not in it is "
     << "added in a trial fit and scored on estimation and held-out data (the smaller gain "
        "counts), with the residual tests that point to it.</p>\n";
+  if (const std::string jn = judge_note(s); !jn.empty()) o << "<p>Judge: " << e(jn) << ".</p>\n";
   o << "<table id=\"findings\"><tr><th>rank</th><th>effect</th><th>score</th>"
        "<th>gain, validation / estimation "
        "(points)</th><th>evidence</th><th>explanation</th></tr>\n";

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "valvediag/diagnosis.hpp"
+#include "valvediag/random_loop.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/verdict.hpp"
 
@@ -303,7 +304,37 @@ TEST_CASE("a loop with no valve problem is not diagnosed with stiction") {
     CHECK(f[0].effect != "stiction");
     CHECK(f[0].effect != "preisach");
     CHECK(verdict(dg) == "no-valve-problem");
+    CHECK(dg.last().judge.horizon == 0);  // a self-regulating model: its simulated output judges
   }
+}
+
+// A level behind a valve with play (development seed 49 of the benchmark): the true model's
+// simulated output drifts with any rate error (the deadband trial, its band right, scored -412
+// points held out so), so an integrating model's step is judged k steps ahead from the measured
+// PV, every trial alike.
+TEST_CASE("an integrating model is judged k steps ahead: the true deadband gains on both parts") {
+  const RandomLoop r = draw_random_loop(49, "deadband");
+  REQUIRE(r.start_model == "integrator");
+  const LoopData d = simulate_random_loop(r);
+  DiagnoseOptions o;
+  o.candidates = {"deadband", "disturbance", "order"};
+  const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("integrator"), o);
+  const DiagnosisStep& s = dg.last();
+  REQUIRE(s.fit.integrating);
+  CHECK(s.judge.horizon > 0);
+  CHECK(s.judge.horizon <= (s.fit.estimation_end - s.fit.first_sample) / 8);
+  CHECK(std::isfinite(s.judge.model_fitness_percent));
+  CHECK(judge_note(s).find("-step-ahead prediction") != std::string::npos);
+  REQUIRE(!s.findings.empty());
+  const Finding& f = s.findings.front();
+  CHECK(f.effect == "deadband");
+  CHECK(f.supported);
+  CHECK(f.estimation_gain_percent >= 2.0);
+  CHECK(f.validation_gain_percent >= 2.0);
+  // The simulated-output figures stay reported beside the judge's.
+  CHECK(std::isfinite(f.trial_validation_fitness_percent));
+  CHECK(f.trial_validation_fitness_percent - s.fit.validation_fitness_percent !=
+        doctest::Approx(f.validation_gain_percent).epsilon(0.01));
 }
 
 // The conclusion names its worst interval on the data's time axis: a record cut after a quiet

@@ -561,3 +561,63 @@ TEST_CASE("a friction effect's band interval") {
   const ModelFit he = fit(d, "stiction", split());
   CHECK_FALSE(band_interval(d.op, d.pv, d.sample_period(), he, "deadband", split()).valid);
 }
+
+namespace {
+// A fit by hand: y(t) = -a y(t-1) + b x(t-1-nk) + c (differenced when integrating), its valve
+// position x and simulated output over n samples.
+ModelFit hand_fit(bool integrating, double a, double b, double c, std::size_t n) {
+  ModelFit f;
+  f.structure = ArxStructure{1, 1, 1};
+  f.integrating = integrating;
+  f.a = {a};
+  f.b = {b};
+  f.c = c;
+  f.first_sample = 3;
+  f.estimation_end = n;
+  f.x_hat.resize(n);
+  for (std::size_t t = 0; t < n; ++t)
+    f.x_hat[t] = std::sin(0.05 * static_cast<double>(t)) + static_cast<double>((t / 37) % 2);
+  std::vector<double> v(n, 0.0);  // the (differenced) output
+  f.y_sim.assign(n, 0.0);
+  for (std::size_t t = 2; t < n; ++t) {
+    v[t] = -a * v[t - 1] + b * f.x_hat[t - 2] + c;
+    f.y_sim[t] = integrating ? f.y_sim[t - 1] + v[t] : v[t];
+  }
+  return f;
+}
+}  // namespace
+
+TEST_CASE("k_step_output: the measured output k samples back, carried through the fit") {
+  constexpr std::size_t n = 400, jump = 200, k = 10;
+  SUBCASE("a stable fit on its own output predicts it exactly at any horizon") {
+    const ModelFit f = hand_fit(false, -0.9, 0.5, 0.1, n);
+    for (std::size_t h : {std::size_t{1}, k, std::size_t{150}}) {
+      const auto p = k_step_output(f, f.y_sim, h);
+      REQUIRE(p.size() == n);
+      double worst = 0;
+      for (std::size_t t = f.first_sample + h; t < n; ++t)
+        worst = std::max(worst, std::abs(p[t] - f.y_sim[t]));
+      CHECK(worst < 1e-9);
+    }
+  }
+  SUBCASE("an integrating fit restarts from the measured level: a level jump is followed") {
+    const ModelFit f = hand_fit(true, -0.5, 0.2, -0.1, n);
+    std::vector<double> y = f.y_sim;
+    for (std::size_t t = jump; t < n; ++t) y[t] += 5.0;  // a load moved the level
+    const auto p = k_step_output(f, y, k);
+    REQUIRE(p.size() == n);
+    double worst_k = 0, least_sim = 1e9;
+    for (std::size_t t = jump + 1 + k; t < n; ++t) {
+      worst_k = std::max(worst_k, std::abs(p[t] - y[t]));
+      least_sim = std::min(least_sim, std::abs(f.y_sim[t] - y[t]));
+    }
+    CHECK(worst_k < 1e-9);
+    CHECK(least_sim == doctest::Approx(5.0));  // the simulated output never recovers
+    // Before the jump's effect reaches it, the prediction is the model's as well.
+    CHECK(std::abs(p[jump - 1] - y[jump - 1]) < 1e-9);
+  }
+  SUBCASE("no linear part, no prediction") {
+    ModelFit f;
+    CHECK(k_step_output(f, std::vector<double>(50, 1.0), 3).empty());
+  }
+}

@@ -217,7 +217,7 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
 TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
   Fixture fx("paper-ex1", "preisach:general", 1500);
   Diagnosis dg;
-  dg.steps.push_back({fx.fit, fx.where, {}});
+  dg.steps.push_back({fx.fit, fx.where, {}, {}});
   dg.limit_cycle.oscillating = true;
   dg.limit_cycle.summary = "PV oscillates <odd>";
   ReportContent c = fx.content();
@@ -233,7 +233,7 @@ TEST_CASE("a recorded valve position: its signature beside the model's, and the 
   Fixture fx("paper-ex1", "preisach:general", 1500);
   REQUIRE(fx.d.has_mv());
   Diagnosis dg;
-  dg.steps.push_back({fx.fit, fx.where, {}});
+  dg.steps.push_back({fx.fit, fx.where, {}, {}});
   dg.valve_travel.tested = dg.valve_travel.decided = true;
   dg.valve_travel.verdict = "stiction";
   dg.valve_travel.summary = "the measured valve position has friction <8.4>";
