@@ -146,6 +146,7 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
   if (!d.db.empty()) {
     RecordedLoop r = read_db_loop(d.db, d.loop, d.from, d.to);
     notes.insert(notes.end(), r.notes.begin(), r.notes.end());
+    d.run_read = r.run;
     return std::move(r.data);
   }
   const bool mat = is_mat_file(d.data);
