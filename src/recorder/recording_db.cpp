@@ -99,7 +99,7 @@ struct RecordingDb::Impl {
   }
 };
 
-RecordingDb::RecordingDb(const std::string& path, bool create)
+RecordingDb::RecordingDb(const std::string& path, bool create, bool defer_if_busy)
     : path_(path), impl_(std::make_unique<Impl>()) {
   impl_->path = path;
   if (!create && !std::filesystem::exists(path))
@@ -112,9 +112,17 @@ RecordingDb::RecordingDb(const std::string& path, bool create)
     impl_->db = nullptr;
     throw std::runtime_error(path + ": cannot open the database: " + m);
   }
-  sqlite3_busy_timeout(impl_->db, 5000);
+  sqlite3_busy_timeout(impl_->db, defer_if_busy ? 250 : 5000);
   try {
     open_tables(create);
+  } catch (const DatabaseBusyError&) {
+    if (defer_if_busy) {
+      tables_pending_ = true;
+      return;
+    }
+    sqlite3_close(impl_->db);
+    impl_->db = nullptr;
+    throw;
   } catch (...) {
     sqlite3_close(impl_->db);
     impl_->db = nullptr;
@@ -123,23 +131,26 @@ RecordingDb::RecordingDb(const std::string& path, bool create)
 }
 
 void RecordingDb::open_tables(bool create) {
-  impl_->exec("PRAGMA journal_mode=WAL");
-  impl_->exec("PRAGMA synchronous=FULL");
-  if (!create) {
+  // Newer tables are refused at once, busy or not (a read).
+  if (!create)
     require_recording(impl_->db, path_);
-    return;
-  }
+  else
+    (void)known_schema_version(impl_->db, path_, kRecordingTables);
+  impl_->exec("PRAGMA journal_mode=WAL", "opening the database");
+  impl_->exec("PRAGMA synchronous=FULL", "opening the database");
+  if (!create) return;
   // One transaction: two recorders creating the tables at once create them once.
   impl_->exec("BEGIN IMMEDIATE", "creating the tables");
   try {
     if (known_schema_version(impl_->db, path_, kRecordingTables) < 1) impl_->exec(kSchema);
     // Files from before versioning get their row too.
     set_schema_version(impl_->db, path_, kRecordingTables);
-    impl_->exec("COMMIT");
+    impl_->exec("COMMIT", "creating the tables");
   } catch (...) {
     impl_->rollback();
     throw;
   }
+  tables_pending_ = false;
 }
 
 RecordingDb::~RecordingDb() {
@@ -147,9 +158,10 @@ RecordingDb::~RecordingDb() {
   if (impl_->db) sqlite3_close(impl_->db);
 }
 
-std::int64_t RecordingDb::begin_run(const std::string& config_file) {
+std::int64_t RecordingDb::begin_run(const std::string& config_file,
+                                    const std::string& started_utc) {
   sqlite3_stmt* s = impl_->prepare("INSERT INTO runs(started_utc, config_file) VALUES(?, ?)");
-  const std::string now = utc_timestamp();
+  const std::string now = started_utc.empty() ? utc_timestamp() : started_utc;
   sqlite3_bind_text(s, 1, now.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(s, 2, config_file.c_str(), -1, SQLITE_TRANSIENT);
   const int rc = sqlite3_step(s);

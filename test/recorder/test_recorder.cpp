@@ -17,6 +17,7 @@
 #include "valvediag/recorder_lock.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sim_plc.hpp"
+#include "valvediag/utc_time.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;
@@ -573,6 +574,77 @@ TEST_CASE("a write lock held past the recorder's limit stops it with a message, 
   Recorder next(fast_site(plc.port()), o, make_bus);
   CHECK(next.interrupted_runs() == std::vector<std::int64_t>{1});
   CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'interrupted' AND id = 1") == 1);
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE("a write lock held when the recorder starts: it polls at once and stores all later") {
+  // Before, the recorder failed after SQLite's 5 s busy timeout and recorded nothing. Now the
+  // rows wait in memory from the first tick, as when the database is busy mid-run.
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  RecorderOptions o;
+  o.duration_s = 6.0;
+  o.loops = {"FIC101"};
+  for (const bool existing : {true, false}) {
+    CAPTURE(existing);
+    o.db_path = fresh_db(existing ? "busy_start" : "busy_start_new");
+    if (existing) {
+      // A recording with one run left `recording` by a killed recorder.
+      RecorderOptions first = o;
+      first.duration_s = 0.3;
+      Recorder r(fast_site(plc.port()), first, make_bus);
+      std::atomic<bool> stop{false};
+      r.run(stop);
+      exec_sql(o.db_path, "UPDATE runs SET status = 'recording'");
+    }
+    std::atomic<bool> taken{false}, release{false};
+    std::thread locker([&] {
+      sqlite3* c = nullptr;
+      sqlite3_open(o.db_path.c_str(), &c);
+      taken = sqlite3_exec(c, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK;
+      test::wait_for([&] { return release.load(); }, 30.0);
+      sqlite3_exec(c, "COMMIT", nullptr, nullptr, nullptr);
+      sqlite3_close(c);
+    });
+    REQUIRE(test::wait_for([&] { return taken.load(); }, 5.0));
+    std::string released_utc;
+    Recorder rec(fast_site(plc.port()), o, make_bus);
+    CHECK_FALSE(rec.database_ready());
+    std::atomic<bool> stop{false};
+    const auto t0 = std::chrono::steady_clock::now();
+    std::thread releaser([&] {
+      std::this_thread::sleep_for(std::chrono::seconds(4));
+      released_utc = utc_timestamp();
+      release = true;
+    });
+    const RecorderStatus s = rec.run(stop);
+    const double took =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    releaser.join();
+    locker.join();
+    const std::string db = o.db_path;
+    const std::string run = std::to_string(rec.run_id());
+    CHECK(rec.run_id() == (existing ? 2 : 1));
+    CHECK(took < 12.0);
+    CHECK(s.loops[0].rows == 120);
+    CHECK(s.committed == 120);
+    CHECK(s.busy_times == 1);
+    CHECK(s.busy_longest_s >= 3.0);
+    CHECK(s.waiting_peak >= 60);
+    const std::string in_run =
+        " FROM samples JOIN loops ON loops.id = samples.loop_id WHERE loops.run_id = " + run;
+    CHECK(scalar(db, "SELECT count(*)" + in_run) == 120);
+    CHECK(scalar(db, "SELECT min(tick)" + in_run) == 0);  // from the first tick
+    CHECK(scalar(db, "SELECT max(tick) + 1 - count(*)" + in_run) == 0);
+    CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed' AND id = " + run) == 1);
+    // The run started when the recorder did, not when the lock was released.
+    CHECK(scalar(db, "SELECT started_utc < '" + released_utc + "' FROM runs WHERE id = " + run) ==
+          1);
+    if (existing) {
+      CHECK(rec.interrupted_runs() == std::vector<std::int64_t>{1});
+      CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'interrupted' AND id = 1") == 1);
+    }
+  }
   CHECK(no_writes(plc));
 }
 
