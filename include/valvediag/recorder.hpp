@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "valvediag/bus.hpp"
+#include "valvediag/csv_reader.hpp"  // kDefaultMaxRows
 #include "valvediag/loop_data.hpp"
 #include "valvediag/schema_versions.hpp"
 #include "valvediag/site_config.hpp"
@@ -119,10 +120,13 @@ struct RecordedLoop {
 // by linear interpolation (with a note): one missed poll on a loaded machine must not cost the
 // analysis most of a window. With `longest_clean`, a range with gaps left gives its longest clean
 // stretch instead (with a note). The recording itself is never changed.
+// As a CSV file: more than `max_rows` rows in the range (memory), or a value no instrument
+// gives (beyond +-1e12, data_checks.hpp), is a DataError naming the run, loop and tick.
 RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
                                 std::optional<double> from_s = std::nullopt,
                                 std::optional<double> to_s = std::nullopt, std::int64_t run = 0,
-                                bool longest_clean = false, std::size_t bridge_ticks = 0);
+                                bool longest_clean = false, std::size_t bridge_ticks = 0,
+                                std::size_t max_rows = kDefaultMaxRows);
 // The short gaps the analysis commands bridge (a loop's dynamics span many samples; two
 // interpolated samples are within the noise of identification).
 inline constexpr std::size_t kBridgedTicks = 2;

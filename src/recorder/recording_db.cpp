@@ -11,6 +11,8 @@
 #include <filesystem>
 #include <type_traits>
 
+#include "valvediag/data_checks.hpp"
+#include "valvediag/data_error.hpp"
 #include "valvediag/recorder.hpp"
 #include "valvediag/recorder_lock.hpp"
 #include "valvediag/schema_versions.hpp"
@@ -301,7 +303,8 @@ std::string fmt_time(double t) {
 
 RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
                                 std::optional<double> from_s, std::optional<double> to_s,
-                                std::int64_t run, bool longest_clean, std::size_t bridge_ticks) {
+                                std::int64_t run, bool longest_clean, std::size_t bridge_ticks,
+                                std::size_t max_rows) {
   if (!std::filesystem::exists(db_path))
     throw std::runtime_error(
         db_path + ": no such database; record one with valvediag record --db " + db_path);
@@ -411,8 +414,29 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     else
       gaps.push_back({a, b, q});
   };
+  const std::string where = "run " + std::to_string(out.run) + ", loop " + name + ", tick ";
+  std::size_t rows_read = 0;
+  // A good value no instrument gives (a corrupt row, a bad-value marker imported as good).
+  auto checked = [&](double v, const char* column, std::int64_t k) {
+    if (const std::string why = signal_value_problem(v); !why.empty()) {
+      sqlite3_finalize(s);
+      throw DataError(db_path, 0, column,
+                      where + std::to_string(k) + " (t = " + fmt_time(static_cast<double>(k) * P) +
+                          " s): " + why);
+    }
+    return v;
+  };
   while (sqlite3_step(s) == SQLITE_ROW) {
     const std::int64_t k = sqlite3_column_int64(s, 0);
+    if (++rows_read > max_rows) {
+      sqlite3_finalize(s);
+      throw DataError(db_path, 0, "",
+                      "run " + std::to_string(out.run) + ", loop " + name + ": more than " +
+                          std::to_string(max_rows) +
+                          " rows in the range, the --max-rows limit that keeps memory bounded "
+                          "(about 50 bytes a row); give --max-rows with a larger number to read "
+                          "it all, or a shorter range (--from/--to)");
+    }
     if (k > prev + 1 && prev >= first) add_gap(prev + 1, k - 1, -1);  // rows lost (kill -9)
     prev = k;
     const int qo = sqlite3_column_int(s, 4), qp = sqlite3_column_int(s, 5);
@@ -421,21 +445,25 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
       continue;
     }
     ticks.push_back(k);
-    op.push_back(sqlite3_column_double(s, 1));
-    pv.push_back(sqlite3_column_double(s, 2));
+    op.push_back(checked(sqlite3_column_double(s, 1), "op", k));
+    pv.push_back(checked(sqlite3_column_double(s, 2), "pv", k));
     if (has_sp) {
       if (sqlite3_column_int(s, 6) != 0) {
         sp_ok = false;
         ++sp_bad;
+        sp.push_back(sqlite3_column_double(s, 3));  // left out below
+      } else {
+        sp.push_back(checked(sqlite3_column_double(s, 3), "sp", k));
       }
-      sp.push_back(sqlite3_column_double(s, 3));
     }
     if (has_mv) {
       if (sqlite3_column_int(s, 8) != 0) {
         mv_ok = false;
         ++mv_bad;
+        mv.push_back(sqlite3_column_double(s, 7));
+      } else {
+        mv.push_back(checked(sqlite3_column_double(s, 7), "mv", k));
       }
-      mv.push_back(sqlite3_column_double(s, 7));
     }
   }
   sqlite3_finalize(s);
