@@ -59,6 +59,23 @@ double wall_now() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
+// The set-up most cases share (TEST_CASE_FIXTURE): the simulated PLC at 10x, started, and the
+// recorder's options.
+struct SimRig {
+  SimPlc plc{load_site_config(kSimSite), SimPlcOptions{10.0, 0}};
+  RecorderOptions o;
+  SimRig() { plc.start(); }
+  // A fresh database `name` for a run of `duration_s` (nullopt: until stopped) over `loops`
+  // (empty: all); its path.
+  std::string fresh(const std::string& name, std::optional<double> duration_s,
+                    std::vector<std::string> loops = {}) {
+    o.db_path = fresh_db(name);
+    o.duration_s = duration_s;
+    o.loops = std::move(loops);
+    return o.db_path;
+  }
+};
+
 bool no_writes(const SimPlc& plc) {
   const auto c = plc.function_counts();
   for (std::size_t fc = 0; fc < c.size(); ++fc)
@@ -67,13 +84,8 @@ bool no_writes(const SimPlc& plc) {
 }
 }  // namespace
 
-TEST_CASE("records one row per tick per loop, all good, and never writes") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("basic");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 1.0;
+TEST_CASE_FIXTURE(SimRig, "records one row per tick per loop, all good, and never writes") {
+  const std::string db = fresh("basic", 1.0);
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   int statuses = 0;
@@ -110,16 +122,10 @@ TEST_CASE("records one row per tick per loop, all good, and never writes") {
   CHECK_THROWS_AS(Recorder(fast_site(plc.port()), unknown, make_bus), std::invalid_argument);
 }
 
-TEST_CASE("server down at start: comm-error rows, backoff, records once it is up") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
+TEST_CASE_FIXTURE(SimRig, "server down at start: comm-error rows, backoff, records once it is up") {
   plc.restart(1.0);  // away for the first second of the recording
   const double t_back = wall_now() + 1.0;
-  const std::string db = fresh_db("down_at_start");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 3.0;
-  o.loops = {"FIC101"};
+  const std::string db = fresh("down_at_start", 3.0, {"FIC101"});
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   const RecorderStatus s = rec.run(stop);
@@ -140,14 +146,10 @@ TEST_CASE("server down at start: comm-error rows, backoff, records once it is up
   CHECK(no_writes(plc));
 }
 
-TEST_CASE(
+TEST_CASE_FIXTURE(
+    SimRig,
     "server restarted while recording: keeps running, reconnects, marks the gap, loses nothing") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("restart");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 4.0;
+  const std::string db = fresh("restart", 4.0);
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   double t_back = 0.0;
@@ -232,12 +234,8 @@ TEST_CASE("timeouts, exceptions and garbled replies are counted and flagged, nev
   CHECK(no_writes(plc));
 }
 
-TEST_CASE("Ctrl-C (the stop flag) ends a run without a duration cleanly") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("stop");
-  RecorderOptions o;
-  o.db_path = db;
+TEST_CASE_FIXTURE(SimRig, "Ctrl-C (the stop flag) ends a run without a duration cleanly") {
+  const std::string db = fresh("stop", std::nullopt);
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   std::thread stopper([&] {
@@ -251,16 +249,10 @@ TEST_CASE("Ctrl-C (the stop flag) ends a run without a duration cleanly") {
   CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'stopped'") == 1);
 }
 
-TEST_CASE("recorded values equal the simulated loop's samples, tick for tick") {
+TEST_CASE_FIXTURE(SimRig, "recorded values equal the simulated loop's samples, tick for tick") {
   // The PLC steps paper-ex1 every 50 ms (10x); the recorder polls every 50 ms half-way between
   // steps, so recorded tick i is simulation step k0 + i, to float32 precision.
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("exact");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 1.0;
-  o.loops = {"FIC101"};
+  const std::string db = fresh("exact", 1.0, {"FIC101"});
   const auto P = std::chrono::duration<double>(kPeriod);
   const double k0 = std::ceil(
       (std::chrono::steady_clock::now() + std::chrono::milliseconds(200) - plc.started()) / P);
@@ -500,17 +492,13 @@ std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bo
 }
 }  // namespace
 
-TEST_CASE("a write lock held 8 s by another process: samples wait in memory, nothing is lost") {
+TEST_CASE_FIXTURE(SimRig,
+                  "a write lock held 8 s by another process: samples wait in memory, nothing is "
+                  "lost") {
   // Before, the recorder gave up after SQLite's 5 s busy timeout ("inserting samples: not an
   // error") and kept what it had stored until then. Locks of up to a minute are the designed
   // bound (busy_limit_s, 90 s by default); 8 s exceeds the old timeout without a minute's wait.
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("busy");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 11.0;
-  o.loops = {"FIC101"};
+  const std::string db = fresh("busy", 11.0, {"FIC101"});
   o.status_interval_s = 0.2;
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false}, taken{false};
@@ -543,14 +531,10 @@ TEST_CASE("a write lock held 8 s by another process: samples wait in memory, not
   CHECK(no_writes(plc));
 }
 
-TEST_CASE("a write lock held past the recorder's limit stops it with a message, never a hang") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("busy_limit");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 30.0;
-  o.loops = {"FIC101"};
+TEST_CASE_FIXTURE(SimRig,
+                  "a write lock held past the recorder's limit stops it with a message, never a "
+                  "hang") {
+  const std::string db = fresh("busy_limit", 30.0, {"FIC101"});
   o.busy_limit_s = 1.5;  // the test's stand-in for the 90 s default
   auto rec = std::make_unique<Recorder>(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false}, taken{false};
@@ -577,17 +561,14 @@ TEST_CASE("a write lock held past the recorder's limit stops it with a message, 
   CHECK(no_writes(plc));
 }
 
-TEST_CASE("a write lock held when the recorder starts: it polls at once and stores all later") {
+TEST_CASE_FIXTURE(SimRig,
+                  "a write lock held when the recorder starts: it polls at once and stores all "
+                  "later") {
   // Before, the recorder failed after SQLite's 5 s busy timeout and recorded nothing. Now the
   // rows wait in memory from the first tick, as when the database is busy mid-run.
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  RecorderOptions o;
-  o.duration_s = 6.0;
-  o.loops = {"FIC101"};
   for (const bool existing : {true, false}) {
     CAPTURE(existing);
-    o.db_path = fresh_db(existing ? "busy_start" : "busy_start_new");
+    fresh(existing ? "busy_start" : "busy_start_new", 6.0, {"FIC101"});
     if (existing) {
       // A recording with one run left `recording` by a killed recorder.
       RecorderOptions first = o;
@@ -648,14 +629,10 @@ TEST_CASE("a write lock held when the recorder starts: it polls at once and stor
   CHECK(no_writes(plc));
 }
 
-TEST_CASE("a second recorder on a database is refused, naming the first; free once it ends") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("two");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 0.5;
-  o.loops = {"FIC101"};
+TEST_CASE_FIXTURE(SimRig,
+                  "a second recorder on a database is refused, naming the first; free once it "
+                  "ends") {
+  const std::string db = fresh("two", 0.5, {"FIC101"});
   const std::string lock = fs::weakly_canonical(db).string() + ".lock";
   {
     Recorder first(fast_site(plc.port()), o, make_bus);
