@@ -471,12 +471,15 @@ TEST_CASE("recordings from before table versions stay readable; newer tables are
 }
 
 namespace {
-// Another process's writer: once the recorder has stored some samples, holds SQLite's write
-// lock on `db` for `hold_s`; `taken` says it got it (a thread of the test stands in for the other
-// process: SQLite locks per connection).
-std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bool>& taken) {
-  return std::thread([db, hold_s, &taken] {
-    if (!test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 10.0))
+// Another process's writer: once the recorder has stored `after_samples` samples (0: at once),
+// holds SQLite's write lock on `db` for `hold_s`; `taken` says it got it (a thread of the test
+// stands in for the other process: SQLite locks per connection).
+std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bool>& taken,
+                            int after_samples = 10) {
+  return std::thread([db, hold_s, &taken, after_samples] {
+    if (after_samples > 0 &&
+        !test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= after_samples; },
+                        10.0))
       return;
     sqlite3* c = nullptr;
     sqlite3_open(db.c_str(), &c);
@@ -578,30 +581,18 @@ TEST_CASE_FIXTURE(SimRig,
       r.run(stop);
       exec_sql(o.db_path, "UPDATE runs SET status = 'recording'");
     }
-    std::atomic<bool> taken{false}, release{false};
-    std::thread locker([&] {
-      sqlite3* c = nullptr;
-      sqlite3_open(o.db_path.c_str(), &c);
-      taken = sqlite3_exec(c, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK;
-      test::wait_for([&] { return release.load(); }, 30.0);
-      sqlite3_exec(c, "COMMIT", nullptr, nullptr, nullptr);
-      sqlite3_close(c);
-    });
+    std::atomic<bool> taken{false};
+    std::thread locker = hold_write_lock(o.db_path, 4.0, taken, 0);
     REQUIRE(test::wait_for([&] { return taken.load(); }, 5.0));
-    std::string released_utc;
+    // Two seconds before the lock goes: the run's start must come before it.
+    const std::string before_release = utc_timestamp(std::time(nullptr) + 2);
     Recorder rec(fast_site(plc.port()), o, make_bus);
     CHECK_FALSE(rec.database_ready());
     std::atomic<bool> stop{false};
     const auto t0 = std::chrono::steady_clock::now();
-    std::thread releaser([&] {
-      std::this_thread::sleep_for(std::chrono::seconds(4));
-      released_utc = utc_timestamp();
-      release = true;
-    });
     const RecorderStatus s = rec.run(stop);
     const double took =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    releaser.join();
     locker.join();
     const std::string db = o.db_path;
     const std::string run = std::to_string(rec.run_id());
@@ -619,8 +610,8 @@ TEST_CASE_FIXTURE(SimRig,
     CHECK(scalar(db, "SELECT max(tick) + 1 - count(*)" + in_run) == 0);
     CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed' AND id = " + run) == 1);
     // The run started when the recorder did, not when the lock was released.
-    CHECK(scalar(db, "SELECT started_utc < '" + released_utc + "' FROM runs WHERE id = " + run) ==
-          1);
+    CHECK(scalar(db, "SELECT started_utc <= '" + before_release +
+                         "' FROM runs WHERE id = " + run) == 1);
     if (existing) {
       CHECK(rec.interrupted_runs() == std::vector<std::int64_t>{1});
       CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'interrupted' AND id = 1") == 1);
