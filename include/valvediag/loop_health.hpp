@@ -37,7 +37,7 @@ LoopHealth loop_health(const LoopData& d, const OpRange& range = {});
 // Why a record cannot carry a model, or "" when it can: no PV recorded, too few samples, OP not
 // moving (span within its noise, or fewer than 2 reversals), OP at its limits nearly all the
 // time, PV flat, or an OP that visits too few levels to identify the Preisach weights (paper
-// section 5).
+// section 5). A spike comes first, named (spike_in): it would otherwise end as one of those.
 std::string unusable_reason(const LoopData& d, const LoopHealth& h, std::size_t min_samples = 200);
 
 }  // namespace valvediag

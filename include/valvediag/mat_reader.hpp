@@ -24,6 +24,7 @@
 #include <utility>
 #include <vector>
 
+#include "valvediag/csv_reader.hpp"  // kDefaultMaxRows
 #include "valvediag/loop_data.hpp"
 
 namespace valvediag {
@@ -65,6 +66,8 @@ struct MatOptions {
   std::optional<double> sample_period;
   // When false a loop without PV is read with pv empty (for import of OP-only records).
   bool require_pv = true;
+  // More samples than this are refused (DataError), as CsvOptions::max_rows.
+  std::size_t max_rows = kDefaultMaxRows;
 };
 
 // Reads loop `loop` (a path as listed; empty: the file's only loop) of `path`. t starts at 0.

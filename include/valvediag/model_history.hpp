@@ -48,5 +48,9 @@ std::size_t append_history(const std::string& path, const std::vector<HistoryEnt
 bool try_append_history(const std::string& path, const std::vector<HistoryEntry>& entries,
                         std::string& why, std::size_t* total = nullptr);
 HistoryEntry history_entry(const ModelFit& fit, const std::string& command);
+// One entry as the file holds it (one line of JSON), for a recording's table model_history;
+// from_json throws std::runtime_error naming `where` when the text is not an entry.
+std::string history_entry_to_json(const HistoryEntry& h);
+HistoryEntry history_entry_from_json(const std::string& text, const std::string& where);
 
 }  // namespace valvediag

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "valvediag/bus.hpp"
+#include "valvediag/csv_reader.hpp"  // kDefaultMaxRows
 #include "valvediag/loop_data.hpp"
 #include "valvediag/schema_versions.hpp"
 #include "valvediag/site_config.hpp"
@@ -54,12 +55,15 @@ class DatabaseBusyError : public std::runtime_error {
 // file and what to do on any other SQLite failure.
 class RecordingDb {
  public:
-  explicit RecordingDb(const std::string& path, bool create = true);
+  // `defer_if_busy`: a database busy for a quarter second leaves the tables to open_tables()
+  // (the recorder polls meanwhile) instead of DatabaseBusyError after 5 s.
+  explicit RecordingDb(const std::string& path, bool create = true, bool defer_if_busy = false);
   ~RecordingDb();
   RecordingDb(const RecordingDb&) = delete;
   RecordingDb& operator=(const RecordingDb&) = delete;
 
-  std::int64_t begin_run(const std::string& config_file);
+  // started_utc: "" for now.
+  std::int64_t begin_run(const std::string& config_file, const std::string& started_utc = "");
   void end_run(std::int64_t run, const std::string& status);
   // Marks `interrupted` the runs left `recording` by a recorder that was killed or aborted;
   // returns their ids. Call only while holding the database's RecorderLock (recorder_lock.hpp):
@@ -74,10 +78,14 @@ class RecordingDb {
   // How long a statement waits for another connection's write lock before DatabaseBusyError.
   void set_busy_timeout(double seconds);
   const std::string& path() const { return path_; }
+  // False while tables deferred by a busy database wait for open_tables().
+  bool tables_open() const { return !tables_pending_; }
+  // Schema check or migration, once the file is open; DatabaseBusyError while it is busy.
+  void open_tables(bool create = true);
   struct Impl;
 
  private:
-  void open_tables(bool create);  // schema check or migration, once the file is open
+  bool tables_pending_ = false;
   std::string path_;
   std::unique_ptr<Impl> impl_;
 };
@@ -112,10 +120,13 @@ struct RecordedLoop {
 // by linear interpolation (with a note): one missed poll on a loaded machine must not cost the
 // analysis most of a window. With `longest_clean`, a range with gaps left gives its longest clean
 // stretch instead (with a note). The recording itself is never changed.
+// As a CSV file: more than `max_rows` rows in the range (memory), or a value no instrument
+// gives (beyond +-1e12, data_checks.hpp), is a DataError naming the run, loop and tick.
 RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
                                 std::optional<double> from_s = std::nullopt,
                                 std::optional<double> to_s = std::nullopt, std::int64_t run = 0,
-                                bool longest_clean = false, std::size_t bridge_ticks = 0);
+                                bool longest_clean = false, std::size_t bridge_ticks = 0,
+                                std::size_t max_rows = kDefaultMaxRows);
 // The short gaps the analysis commands bridge (a loop's dynamics span many samples; two
 // interpolated samples are within the noise of identification).
 inline constexpr std::size_t kBridgedTicks = 2;
@@ -166,7 +177,8 @@ using BusFactory =
 class Recorder {
  public:
   // Checks the loop selection against the site, builds the buses through `factory`, takes the
-  // database's recorder lock, then opens (creates) the database; throws std::invalid_argument
+  // database's recorder lock, then opens (creates) the database (a busy one: database_ready());
+  // throws std::invalid_argument
   // for an unknown loop name, DatabaseInUseError when another recorder holds the lock,
   // std::runtime_error when a bus cannot exist (no SocketCAN) or the database cannot be opened.
   // Nothing is sent on any bus before run().
@@ -177,8 +189,12 @@ class Recorder {
   RecorderStatus run(const std::atomic<bool>& stop,
                      const std::function<void(const RecorderStatus&)>& on_status = {});
   std::int64_t run_id() const;
-  // Runs a killed or aborted recorder had left `recording`, marked `interrupted` on opening.
+  // Runs a killed or aborted recorder had left `recording`, marked `interrupted` on opening (or,
+  // when the database was busy then, once it is free: look again after run()).
   const std::vector<std::int64_t>& interrupted_runs() const;
+  // False while a busy database (another process's write lock) keeps the recorder from setting
+  // up its tables: run() then polls at once and holds the samples in memory until it is free.
+  bool database_ready() const;
 
  private:
   struct Impl;

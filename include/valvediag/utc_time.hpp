@@ -7,8 +7,7 @@
 
 namespace valvediag {
 
-inline std::string utc_timestamp() {
-  const std::time_t t = std::time(nullptr);
+inline std::string utc_timestamp(std::time_t t = std::time(nullptr)) {
   std::tm tm{};
   gmtime_r(&t, &tm);
   char b[32];

@@ -75,7 +75,7 @@ void add_diagnose(CLI::App& app, int& exit_code) {
     std::vector<std::string> notes;
     const LoopData whole = load_data(a->data, notes);
     check_identifiable_data(whole, 200, "a diagnosis");
-    const std::string history = history_file(a->hist, a->data, whole);
+    const HistoryPlace history = history_place(a->hist, a->data, whole);
     // The same part of the record a sweep diagnoses (quiet_lead_in.hpp).
     const AnalysedPart part = analysed_part(whole, a->keep_lead_in, range, notes);
     const std::string& unusable = part.unusable;
@@ -152,18 +152,18 @@ void add_ladder(CLI::App& app, int& exit_code) {
     std::vector<std::string> notes;
     const LoopData d = load_data(a->data, notes);
     const std::string name = data_name(a->data);
-    const std::string path = history_file(a->hist, a->data, d);
-    if (path.empty()) {
+    const HistoryPlace place = history_place(a->hist, a->data, d);
+    if (place.empty()) {
       std::string why;
       (void)history_state_dir(why);
       throw UsageError(why);
     }
-    const auto entries = load_history(path);
+    const auto entries = load_history_at(place);
     const std::string source =
         a->data.db.empty() ? a->data.data + (a->data.loop.empty() ? "" : " --loop " + a->data.loop)
                            : "--db " + a->data.db + " --loop " + a->data.loop;
     if (entries.empty())
-      throw UsageError("no model history for " + name + " (" + path +
+      throw UsageError("no model history for " + name + " (" + place.where() +
                        "): run 'valvediag diagnose " + source + " --auto' or 'valvediag fit " +
                        source + " --model SPEC' first");
     std::cout << format_ladder(entries);

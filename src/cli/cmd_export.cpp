@@ -2,12 +2,13 @@
 
 #include "commands.hpp"
 #include "valvediag/csv_writer.hpp"
+#include "valvediag/data_error.hpp"
 #include "valvediag/recorder.hpp"
 
 namespace valvediag::cli {
 
 RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const std::string& from,
-                          const std::string& to, std::int64_t run) {
+                          const std::string& to, std::int64_t run, std::size_t max_rows) {
   auto seconds = [](const std::string& opt, const std::string& v) -> std::optional<double> {
     if (v.empty()) return std::nullopt;
     try {
@@ -20,7 +21,10 @@ RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const 
   };
   if (loop.empty()) throw UsageError("--db needs --loop NAME");
   try {
-    return read_recorded_loop(db, loop, seconds("--from", from), seconds("--to", to), run);
+    return read_recorded_loop(db, loop, seconds("--from", from), seconds("--to", to), run, false, 0,
+                              max_rows);
+  } catch (const DataError&) {
+    throw;  // names the run, loop and tick already
   } catch (const RecordingGapError& e) {
     throw UsageError(e.what());
   } catch (const std::runtime_error& e) {

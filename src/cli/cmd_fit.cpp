@@ -92,13 +92,13 @@ std::size_t validation_start(LoopData& d, const std::string& spec, FitOptions& f
 }  // namespace
 
 // fit --model/--add/--remove: a composable model, relative to the data's model history.
-int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const std::string& history,
+int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const HistoryPlace& history,
              const LoopVerdict* lv) {
   ModelSpec spec = parse_model_spec("linear");
   if (!a.model.empty()) {
     spec = parse_model_spec(a.model);
   } else {
-    const auto h = load_history(history);
+    const auto h = load_history_at(history);
     if (!h.empty()) spec = parse_model_spec(h.back().model);
     std::cout << "note: starting from the last model of this data: " << to_string(spec)
               << (h.empty() ? " (no history yet)" : "") << "\n";
@@ -281,7 +281,7 @@ void add_fit(CLI::App& app, int& exit_code) {
     if (a->output == "mv" && a->in.csv.mv_column.empty()) a->in.csv.mv_column = "mv";
     LoopData d = load_data(a->in, notes);
     // Keyed by the data as read, before --validate A:B cuts it.
-    const std::string history = history_file(a->hist, a->in, d);
+    const HistoryPlace history = history_place(a->hist, a->in, d);
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     const LoopData whole = a->verdict ? d : LoopData{};  // --validate A:B may cut d below
     FitOptions& fo = a->fit;

@@ -1,5 +1,6 @@
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
@@ -124,10 +125,22 @@ void add_record(CLI::App& app, int& exit_code) {
     }
     Recorder& rec = *rec_ptr;
     const bool tty = ::isatty(2) != 0;
-    for (std::int64_t r : rec.interrupted_runs())
-      std::cerr << "note: run " << r << " in " << a->db
-                << " was left 'recording' by a recorder that did not end cleanly (killed, or "
-                   "stopped by an error): marked 'interrupted'\n";
+    std::size_t noted = 0;  // a busy database at the start: they are marked once it is free
+    auto note_interrupted = [&] {
+      for (; noted < rec.interrupted_runs().size(); ++noted)
+        std::cerr << "note: run " << rec.interrupted_runs()[noted] << " in " << a->db
+                  << " was left 'recording' by a recorder that did not end cleanly (killed, or "
+                     "stopped by an error): marked 'interrupted'\n";
+    };
+    note_interrupted();
+    if (!rec.database_ready())
+      std::cerr << "note: " << a->db
+                << " is busy: another process holds SQLite's write lock (SQLite cannot say "
+                   "which; fuser "
+                << a->db
+                << " may). Polling starts now; the samples wait in memory and are stored once "
+                   "it is free (up to "
+                << std::lround(o.busy_limit_s) << " s)\n";
     std::cerr << "recording into " << a->db << "; Ctrl-C stops\n";
     const RecorderStatus s = rec.run(stop, [&](const RecorderStatus& st) {
       if (a->quiet) return;
@@ -137,6 +150,7 @@ void add_record(CLI::App& app, int& exit_code) {
         std::cerr << status_line(st) << "\n";
     });
     if (tty && !a->quiet) std::cerr << "\n";
+    note_interrupted();
     std::cout << recorder_summary(s, a->db, rec.run_id());
     exit_code = s.errors() ? kRecordedWithErrors : kOk;
   });

@@ -141,7 +141,7 @@ void add_report(CLI::App& app, int& exit_code) {
     const LoopData& d = part.data;
     if (auto n = op_range_note(d, range, !a->op_range.empty()); !n.empty()) notes.push_back(n);
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
-    std::string history = history_file(a->hist, a->data, whole);
+    HistoryPlace history = history_place(a->hist, a->data, whole);
     auto ladder = read_history_or_warn(history);
     if (!spec) {
       spec = parse_model_spec(ladder.empty() ? "preisach:general" : ladder.back().model);

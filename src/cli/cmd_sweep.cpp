@@ -118,8 +118,9 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
                    ": record first (valvediag record, or sweep --record 10m)";
         return assessment_json(x).dump();
       }
-      RecordedLoop r = read_recorded_loop(a.db, job.name, std::max(0.0, *end - window_s), *end, 0,
-                                          /*longest_clean=*/true, kBridgedTicks);
+      RecordedLoop r =
+          read_recorded_loop(a.db, job.name, std::max(0.0, *end - window_s), *end, 0,
+                             /*longest_clean=*/true, kBridgedTicks, a.layout.csv.max_rows);
       d = std::move(r.data);
       d.source = a.db + " (run " + std::to_string(r.run) + ")";
     }

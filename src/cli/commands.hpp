@@ -40,9 +40,10 @@ void add_sweep_merge(CLI::App& app, int& exit_code);
 void add_trend(CLI::App& app, int& exit_code);
 
 // A loop read from a recording (--db/--loop of export and fit); --from/--to in seconds. Gaps and
-// unknown names are UsageErrors (exit status 2).
+// unknown names are UsageErrors, too many rows or an absurd value a DataError (exit status 2).
 RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const std::string& from,
-                          const std::string& to, std::int64_t run = 0);
+                          const std::string& to, std::int64_t run = 0,
+                          std::size_t max_rows = kDefaultMaxRows);
 // "A,B,,C" -> {A, B, C}: the --loops lists of record and sweep.
 std::vector<std::string> split_names(const std::string& s);
 // The recorder's end-of-run summary (record and demo).

@@ -77,8 +77,8 @@ void add_layout_options(CLI::App* cmd, DataOptions& d) {
   cmd->add_flag("--resample", d.csv.resample, "interpolate irregular sampling onto a uniform grid")
       ->group(g);
   cmd->add_option("--max-rows", d.csv.max_rows,
-                  "refuse a CSV file with more data rows than this (it bounds memory, about 50 "
-                  "bytes a row)")
+                  "refuse data (a CSV or .mat file, a --db range) with more rows than this (it "
+                  "bounds memory, about 50 bytes a row)")
       // An upper end, so that "-3" (read as a huge unsigned number) is refused.
       ->check(CLI::Range(std::size_t{2}, std::size_t{1'000'000'000'000}))
       ->group(g)
@@ -144,8 +144,9 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
   if (d.data.empty() == d.db.empty())
     throw UsageError("give a CSV or .mat file, or --db site.sqlite --loop NAME (one of them)");
   if (!d.db.empty()) {
-    RecordedLoop r = read_db_loop(d.db, d.loop, d.from, d.to);
+    RecordedLoop r = read_db_loop(d.db, d.loop, d.from, d.to, 0, d.csv.max_rows);
     notes.insert(notes.end(), r.notes.begin(), r.notes.end());
+    d.run_read = r.run;
     return std::move(r.data);
   }
   const bool mat = is_mat_file(d.data);
@@ -164,11 +165,10 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
     const CsvOptions plain;
     const CsvOptions& c = d.csv;
     if (c.delimiter != plain.delimiter || c.skip_lines || c.skip_after_header ||
-        c.time_format != plain.time_format || c.resample || d.decimal != "." ||
-        c.max_rows != plain.max_rows)
+        c.time_format != plain.time_format || c.resample || d.decimal != ".")
       throw UsageError(d.data +
                        ": --delimiter, --skip-lines, --skip-after-header, --time-format, "
-                       "--resample, --decimal and --max-rows are for CSV files, not .mat");
+                       "--resample and --decimal are for CSV files, not .mat");
     MatOptions m;
     m.op = c.op_column;
     m.pv = c.pv_column;
@@ -177,6 +177,7 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
     m.t = c.t_column;
     m.sample_period = c.sample_period;
     m.require_pv = d.require_pv;
+    m.max_rows = c.max_rows;
     return read_mat_loop_isolated(d.data, d.loop, m, &notes);
   }
   d.csv.decimal = d.decimal[0];

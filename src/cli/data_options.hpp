@@ -5,6 +5,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -22,6 +23,7 @@ struct DataOptions {
   std::string decimal = ".";
   std::string db, loop, from, to;  // a recorded loop (valvediag record) instead of a file;
                                    // loop also names the loop inside a .mat file
+  std::int64_t run_read = 0;       // set by load_data: the run a --db loop was read from
   // "auto" (sniff the CSV layout the options leave open) or "plain"; see CsvOptions::format.
   std::string format = "auto";
   // The layout options as registered, to tell which the user gave (their count()).

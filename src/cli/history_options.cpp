@@ -1,5 +1,7 @@
 #include "history_options.hpp"
 
+#include <algorithm>
+#include <cstdio>
 #include <iostream>
 
 namespace valvediag::cli {
@@ -7,7 +9,8 @@ namespace valvediag::cli {
 void add_history_options(CLI::App* cmd, HistoryOptions& h, const char* group, bool writes) {
   cmd->add_option("--history", h.file,
                   "the model history file (default: one per data content and reading options in "
-                  "$XDG_STATE_HOME/valvediag, else ~/.local/state/valvediag)")
+                  "$XDG_STATE_HOME/valvediag, else ~/.local/state/valvediag; for --db, the "
+                  "recording's table model_history)")
       ->group(group);
   if (writes) cmd->add_flag("--no-history", h.off, "do not add to the model history")->group(group);
 }
@@ -24,39 +27,106 @@ std::string reading_options(const DataOptions& d) {
   return s;
 }
 
-std::string history_file(const HistoryOptions& h, const DataOptions& d, const LoopData& data) {
-  if (!h.file.empty()) return h.file;
-  std::string why;
-  const std::string dir = history_state_dir(why);
-  if (dir.empty()) {
-    if (!h.off) std::cerr << "warning: " << why << "; going on without a model history\n";
-    return "";
+namespace {
+
+// --from/--to as numbers ("600" and "600.0" read the same samples): the recording's key.
+std::string db_reading(const DataOptions& d) {
+  std::string s;
+  for (const auto& [opt, v] : {std::pair{"--from", &d.from}, std::pair{"--to", &d.to}}) {
+    if (v->empty()) continue;
+    char buf[40];
+    std::snprintf(buf, sizeof buf, "%.15g", std::stod(*v));  // load_data checked it
+    s += (s.empty() ? "" : " ") + std::string(opt) + " " + buf;
   }
-  return history_file_in(dir, history_key(data, reading_options(d)));
+  return s;
 }
 
-std::vector<HistoryEntry> read_history_or_warn(std::string& path) {
-  if (path.empty()) return {};
+}  // namespace
+
+std::string HistoryPlace::where() const {
+  return db.empty() ? file : db + " (table model_history)";
+}
+
+HistoryPlace history_place(const HistoryOptions& h, const DataOptions& d, const LoopData& data) {
+  HistoryPlace p;
+  if (!h.file.empty()) {
+    p.file = h.file;
+    return p;
+  }
+  std::string why;
+  const std::string dir = history_state_dir(why);
+  if (!d.db.empty()) {
+    // A recorded loop's history lives in its recording; the state directory only catches what
+    // the database cannot take.
+    p.db = d.db;
+    p.key = {d.run_read, d.loop, db_reading(d)};
+  } else if (dir.empty() && !h.off) {
+    std::cerr << "warning: " << why << "; going on without a model history\n";
+  }
+  if (!dir.empty()) p.file = history_file_in(dir, history_key(data, reading_options(d)));
+  return p;
+}
+
+std::vector<HistoryEntry> load_history_at(const HistoryPlace& p) {
+  std::vector<HistoryEntry> out;
+  if (!p.db.empty())
+    for (const std::string& text : load_recording_history(p.db, p.key))
+      out.push_back(history_entry_from_json(text, p.where()));
+  if (p.file.empty()) return out;
+  std::vector<HistoryEntry> more = load_history(p.file);
+  if (p.db.empty() || more.empty()) return more.empty() ? out : more;
+  // Entries the database could not take: in time order with the others (UTC ISO 8601 sorts).
+  out.insert(out.end(), more.begin(), more.end());
+  std::stable_sort(out.begin(), out.end(),
+                   [](const HistoryEntry& a, const HistoryEntry& b) { return a.time < b.time; });
+  return out;
+}
+
+std::vector<HistoryEntry> read_history_or_warn(HistoryPlace& p) {
+  if (p.empty()) return {};
   try {
-    return load_history(path);
+    return load_history_at(p);
   } catch (const std::runtime_error& e) {
     std::cerr << "warning: " << e.what() << "; going on without it\n";
-    path.clear();
+    p = {};
     return {};
   }
 }
 
-void record_history(const std::string& path, const std::vector<HistoryEntry>& entries,
+namespace {
+
+// "model history: PATH (3 fits)", "model history: site.sqlite (table model_history, 3 fits)".
+void say_where(const std::string& where, const std::string& table, std::size_t total) {
+  std::cout << "model history: " << where << " (" << table << total
+            << (total == 1 ? " fit)" : " fits)") << "\n";
+}
+
+}  // namespace
+
+void record_history(const HistoryPlace& p, const std::vector<HistoryEntry>& entries,
                     const std::string& result) {
-  if (path.empty() || entries.empty()) return;
+  if (p.empty() || entries.empty()) return;
+  const char* elsewhere = " (--no-history skips this, --history FILE puts it elsewhere)\n";
+  if (!p.db.empty()) {
+    std::vector<StoredHistoryEntry> rows;
+    for (const HistoryEntry& e : entries)
+      rows.push_back({e.model, e.time, history_entry_to_json(e)});
+    try {
+      say_where(p.db, "table model_history, ", append_recording_history(p.db, p.key, rows));
+      return;
+    } catch (const std::exception& e) {
+      std::cerr << "warning: " << e.what() << "; "
+                << (p.file.empty() ? result + " stands without a model history" + elsewhere
+                                   : "the model history goes to the state directory instead\n");
+    }
+    if (p.file.empty()) return;
+  }
   std::string why;
   std::size_t total = 0;
-  if (try_append_history(path, entries, why, &total))
-    std::cout << "model history: " << path << " (" << total << (total == 1 ? " fit)" : " fits)")
-              << "\n";
+  if (try_append_history(p.file, entries, why, &total))
+    say_where(p.file, "", total);
   else
-    std::cerr << "warning: " << why << "; " << result
-              << " stands (--no-history skips this, --history FILE puts it elsewhere)\n";
+    std::cerr << "warning: " << why << "; " << result << " stands" << elsewhere;
 }
 
 }  // namespace valvediag::cli

@@ -574,6 +574,15 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
   auto note = [&](const std::string& s) {
     if (notes) notes->push_back(s);
   };
+  // Before the values are copied out: the same bound and message as a CSV file's.
+  auto check_rows = [&](std::size_t n, const std::string& what) {
+    if (n > o.max_rows)
+      throw fail(what + " has " + std::to_string(n) + " samples, more than " +
+                 std::to_string(o.max_rows) +
+                 ", the --max-rows limit that keeps memory bounded (about 50 bytes a row); give "
+                 "--max-rows with a larger number to read it all, or cut the record into "
+                 "shorter ones");
+  };
   LoopData d;
   d.source = path + ":" + f.path;
   std::optional<double> period = o.sample_period;
@@ -582,6 +591,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
 
   if (f.matrix) {
     const std::size_t rows = f.matrix->dims[0], cols = f.matrix->dims[1];
+    check_rows(rows, "the matrix");
     std::string why;
     auto all = values(f.matrix, why);
     if (!all) throw fail("the matrix " + why);
@@ -655,6 +665,7 @@ LoopData read_mat_loop(const std::string& path, const std::string& loop, const M
                         ? "; identification needs the process variable next to OP"
                         : ""));
       }
+      check_rows(element_count(fv), "field " + name);
       std::string why;
       auto x = values(fv, why);
       if (!x) throw fail("field " + name + " " + why);

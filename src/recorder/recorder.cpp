@@ -12,6 +12,7 @@
 
 #include "valvediag/recorder_lock.hpp"
 #include "valvediag/text_stats.hpp"
+#include "valvediag/utc_time.hpp"
 
 namespace valvediag {
 
@@ -51,7 +52,10 @@ struct Recorder::Impl {
   std::unique_ptr<RecorderLock> db_lock;  // released after the database is closed
   std::unique_ptr<RecordingDb> db;
   std::vector<std::int64_t> interrupted;
+  bool interrupted_marked = false;
   std::int64_t run = 0;
+  std::string started_utc;  // when run() began: the run's start however long the database waits
+  bool ready = false;       // tables, run and loops in the database: rows can be stored
   std::vector<PolledLoop> loops;
   std::vector<BusWorker> workers;
 
@@ -64,9 +68,12 @@ struct Recorder::Impl {
   std::string last_error;
   std::vector<GapRow> closed_gaps;
 
-  // Commit thread only: taken from the queue, not yet stored (the database was busy).
+  // Commit thread only: taken from the queue, not yet stored (the database was busy). Rows and
+  // gaps are produced with the loop's index in `loops` as loop_id (polling starts before the
+  // database may have the loops); the first `mapped` carry the database's id.
   std::vector<SampleRow> pending;
   std::vector<GapRow> pending_gaps;
+  std::size_t mapped = 0, mapped_gaps = 0;
   std::optional<Clock::time_point> busy_since;
   double busy_longest = 0.0;
   std::uint64_t busy_times = 0, waiting_peak = 0;
@@ -101,7 +108,8 @@ struct Recorder::Impl {
     if (good) {
       ++c.good;
       if (l.gap_start >= 0) {
-        closed_gaps.push_back({l.db_id, l.gap_start, l.gap_last, l.gap_reason});
+        closed_gaps.push_back(
+            {static_cast<std::int64_t>(li), l.gap_start, l.gap_last, l.gap_reason});
         ++c.gaps;
         l.gap_start = -1;
       }
@@ -152,7 +160,7 @@ struct Recorder::Impl {
       std::unique_lock lock(mutex);
       for (std::int64_t k = l.next_tick; k < k_now; ++k) {
         SampleRow r;
-        r.loop_id = l.db_id;
+        r.loop_id = static_cast<std::int64_t>(next_li);
         r.tick = k;
         r.wall = wall_now();
         r.lateness = since(t0, start) - static_cast<double>(k) * P;
@@ -168,7 +176,7 @@ struct Recorder::Impl {
       }
       lock.lock();
       SampleRow r;
-      r.loop_id = l.db_id;
+      r.loop_id = static_cast<std::int64_t>(next_li);
       r.tick = k_now;
       r.wall = wall_now();
       // Lateness against the tick that was due, so that falling behind shows in the figures.
@@ -234,6 +242,23 @@ struct Recorder::Impl {
     return true;
   }
 
+  // What the database needs before the first row, each step once: the tables, the runs a
+  // killed recorder left, the run, the loops. Throws DatabaseBusyError while it is busy.
+  void set_up() {
+    if (!db->tables_open()) db->open_tables();
+    if (!interrupted_marked) {
+      interrupted = db->mark_interrupted_runs();
+      interrupted_marked = true;
+    }
+    if (run == 0) {
+      run = db->begin_run(site.file, started_utc);
+      db_lock->set_run(run);
+    }
+    for (auto& l : loops)
+      if (l.db_id == 0) l.db_id = db->add_loop(run, l.cfg);
+    ready = true;
+  }
+
   // Stores the rows and gaps produced so far; false while the database is busy (they wait).
   bool commit(Clock::time_point now) {
     {
@@ -246,11 +271,18 @@ struct Recorder::Impl {
       pending_gaps.insert(pending_gaps.end(), closed_gaps.begin(), closed_gaps.end());
       closed_gaps.clear();
     }
+    if (!ready && !stored([&] { set_up(); }, now)) return false;
+    for (; mapped < pending.size(); ++mapped)
+      pending[mapped].loop_id = loops[static_cast<std::size_t>(pending[mapped].loop_id)].db_id;
+    for (; mapped_gaps < pending_gaps.size(); ++mapped_gaps)
+      pending_gaps[mapped_gaps].loop_id =
+          loops[static_cast<std::size_t>(pending_gaps[mapped_gaps].loop_id)].db_id;
     if (!stored([&] { db->insert(pending, pending_gaps); }, now)) return false;
     std::lock_guard lock(mutex);
     committed += pending.size();
     pending.clear();
     pending_gaps.clear();
+    mapped = mapped_gaps = 0;
     return true;
   }
 };
@@ -300,9 +332,18 @@ Recorder::Recorder(SiteConfig site, RecorderOptions options, BusFactory factory)
     m.workers.push_back(std::move(w));
   }
   m.db_lock = std::make_unique<RecorderLock>(m.opt.db_path);
-  m.db = std::make_unique<RecordingDb>(m.opt.db_path);
-  // Holding the lock, no other recorder is running: a run still `recording` was cut short.
-  m.interrupted = m.db->mark_interrupted_runs();
+  // A database busy now (another process's write transaction) is no reason to lose the start
+  // of the recording: run() polls at once and the rows wait in memory, as mid-run.
+  m.db = std::make_unique<RecordingDb>(m.opt.db_path, true, true);
+  m.db->set_busy_timeout(0.25);
+  try {
+    // Holding the lock, no other recorder is running: a run still `recording` was cut short.
+    if (m.db->tables_open()) {
+      m.interrupted = m.db->mark_interrupted_runs();
+      m.interrupted_marked = true;
+    }
+  } catch (const DatabaseBusyError&) {  // marked once the database is free
+  }
 }
 
 Recorder::~Recorder() = default;
@@ -315,23 +356,28 @@ const std::vector<std::int64_t>& Recorder::interrupted_runs() const {
   return impl_->interrupted;
 }
 
+bool Recorder::database_ready() const {
+  return impl_->ready || (impl_->db->tables_open() && impl_->interrupted_marked);
+}
+
 RecorderStatus Recorder::run(const std::atomic<bool>& stop,
                              const std::function<void(const RecorderStatus&)>& on_status) {
   Impl& m = *impl_;
-  m.run = m.db->begin_run(m.site.file);
-  m.db_lock->set_run(m.run);
-  for (auto& l : m.loops) l.db_id = m.db->add_loop(m.run, l.cfg);
+  m.started_utc = utc_timestamp();
+  // Commits must not stall the status line: a busy database is retried each commit interval.
+  m.db->set_busy_timeout(0.25);
+  const auto t0 = m.opt.start.value_or(Clock::now());
+  // The run and its loops now if the database lets us; else the polls start anyway and the
+  // commits retry (stored() counts the wait against busy_limit_s).
+  (void)m.stored([&] { m.set_up(); }, Clock::now());
 
   std::atomic<bool> done{false};
-  const auto t0 = m.opt.start.value_or(Clock::now());
   std::atomic<int> running{static_cast<int>(m.workers.size())};
   for (auto& w : m.workers)
     w.thread = std::thread([&m, &w, t0, &stop, &done, &running] {
       m.poll(w, t0, stop, done);
       --running;
     });
-  // Commits must not stall the status line: a busy database is retried each commit interval.
-  m.db->set_busy_timeout(0.25);
   auto last_commit = t0, last_status = t0;
   std::string failure;
   auto report = [&](Clock::time_point now) {
@@ -362,7 +408,8 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
     std::lock_guard lock(m.mutex);
     for (auto& l : m.loops)
       if (l.gap_start >= 0) {
-        m.closed_gaps.push_back({l.db_id, l.gap_start, l.gap_last, l.gap_reason});
+        m.closed_gaps.push_back({static_cast<std::int64_t>(&l - m.loops.data()), l.gap_start,
+                                 l.gap_last, l.gap_reason});
         ++m.counts[static_cast<std::size_t>(&l - m.loops.data())].gaps;
         l.gap_start = -1;
       }
@@ -382,7 +429,7 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
   const RecorderStatus s = m.status(since(t0, Clock::now()));
   if (!failure.empty()) {
     try {
-      m.db->end_run(m.run, "interrupted");
+      if (m.run > 0) m.db->end_run(m.run, "interrupted");
     } catch (const std::exception&) {  // busy or failing: the next recorder marks it
     }
     throw std::runtime_error(failure);

@@ -11,6 +11,8 @@
 #include <filesystem>
 #include <type_traits>
 
+#include "valvediag/data_checks.hpp"
+#include "valvediag/data_error.hpp"
 #include "valvediag/recorder.hpp"
 #include "valvediag/recorder_lock.hpp"
 #include "valvediag/schema_versions.hpp"
@@ -99,7 +101,7 @@ struct RecordingDb::Impl {
   }
 };
 
-RecordingDb::RecordingDb(const std::string& path, bool create)
+RecordingDb::RecordingDb(const std::string& path, bool create, bool defer_if_busy)
     : path_(path), impl_(std::make_unique<Impl>()) {
   impl_->path = path;
   if (!create && !std::filesystem::exists(path))
@@ -112,9 +114,17 @@ RecordingDb::RecordingDb(const std::string& path, bool create)
     impl_->db = nullptr;
     throw std::runtime_error(path + ": cannot open the database: " + m);
   }
-  sqlite3_busy_timeout(impl_->db, 5000);
+  sqlite3_busy_timeout(impl_->db, defer_if_busy ? 250 : 5000);
   try {
     open_tables(create);
+  } catch (const DatabaseBusyError&) {
+    if (defer_if_busy) {
+      tables_pending_ = true;
+      return;
+    }
+    sqlite3_close(impl_->db);
+    impl_->db = nullptr;
+    throw;
   } catch (...) {
     sqlite3_close(impl_->db);
     impl_->db = nullptr;
@@ -123,23 +133,26 @@ RecordingDb::RecordingDb(const std::string& path, bool create)
 }
 
 void RecordingDb::open_tables(bool create) {
-  impl_->exec("PRAGMA journal_mode=WAL");
-  impl_->exec("PRAGMA synchronous=FULL");
-  if (!create) {
+  // Newer tables are refused at once, busy or not (a read).
+  if (!create)
     require_recording(impl_->db, path_);
-    return;
-  }
+  else
+    (void)known_schema_version(impl_->db, path_, kRecordingTables);
+  impl_->exec("PRAGMA journal_mode=WAL", "opening the database");
+  impl_->exec("PRAGMA synchronous=FULL", "opening the database");
+  if (!create) return;
   // One transaction: two recorders creating the tables at once create them once.
   impl_->exec("BEGIN IMMEDIATE", "creating the tables");
   try {
     if (known_schema_version(impl_->db, path_, kRecordingTables) < 1) impl_->exec(kSchema);
     // Files from before versioning get their row too.
     set_schema_version(impl_->db, path_, kRecordingTables);
-    impl_->exec("COMMIT");
+    impl_->exec("COMMIT", "creating the tables");
   } catch (...) {
     impl_->rollback();
     throw;
   }
+  tables_pending_ = false;
 }
 
 RecordingDb::~RecordingDb() {
@@ -147,9 +160,10 @@ RecordingDb::~RecordingDb() {
   if (impl_->db) sqlite3_close(impl_->db);
 }
 
-std::int64_t RecordingDb::begin_run(const std::string& config_file) {
+std::int64_t RecordingDb::begin_run(const std::string& config_file,
+                                    const std::string& started_utc) {
   sqlite3_stmt* s = impl_->prepare("INSERT INTO runs(started_utc, config_file) VALUES(?, ?)");
-  const std::string now = utc_timestamp();
+  const std::string now = started_utc.empty() ? utc_timestamp() : started_utc;
   sqlite3_bind_text(s, 1, now.c_str(), -1, SQLITE_TRANSIENT);
   sqlite3_bind_text(s, 2, config_file.c_str(), -1, SQLITE_TRANSIENT);
   const int rc = sqlite3_step(s);
@@ -289,7 +303,8 @@ std::string fmt_time(double t) {
 
 RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
                                 std::optional<double> from_s, std::optional<double> to_s,
-                                std::int64_t run, bool longest_clean, std::size_t bridge_ticks) {
+                                std::int64_t run, bool longest_clean, std::size_t bridge_ticks,
+                                std::size_t max_rows) {
   if (!std::filesystem::exists(db_path))
     throw std::runtime_error(
         db_path + ": no such database; record one with valvediag record --db " + db_path);
@@ -399,8 +414,29 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     else
       gaps.push_back({a, b, q});
   };
+  const std::string where = "run " + std::to_string(out.run) + ", loop " + name + ", tick ";
+  std::size_t rows_read = 0;
+  // A good value no instrument gives (a corrupt row, a bad-value marker imported as good).
+  auto checked = [&](double v, const char* column, std::int64_t k) {
+    if (const std::string why = signal_value_problem(v); !why.empty()) {
+      sqlite3_finalize(s);
+      throw DataError(db_path, 0, column,
+                      where + std::to_string(k) + " (t = " + fmt_time(static_cast<double>(k) * P) +
+                          " s): " + why);
+    }
+    return v;
+  };
   while (sqlite3_step(s) == SQLITE_ROW) {
     const std::int64_t k = sqlite3_column_int64(s, 0);
+    if (++rows_read > max_rows) {
+      sqlite3_finalize(s);
+      throw DataError(db_path, 0, "",
+                      "run " + std::to_string(out.run) + ", loop " + name + ": more than " +
+                          std::to_string(max_rows) +
+                          " rows in the range, the --max-rows limit that keeps memory bounded "
+                          "(about 50 bytes a row); give --max-rows with a larger number to read "
+                          "it all, or a shorter range (--from/--to)");
+    }
     if (k > prev + 1 && prev >= first) add_gap(prev + 1, k - 1, -1);  // rows lost (kill -9)
     prev = k;
     const int qo = sqlite3_column_int(s, 4), qp = sqlite3_column_int(s, 5);
@@ -409,21 +445,25 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
       continue;
     }
     ticks.push_back(k);
-    op.push_back(sqlite3_column_double(s, 1));
-    pv.push_back(sqlite3_column_double(s, 2));
+    op.push_back(checked(sqlite3_column_double(s, 1), "op", k));
+    pv.push_back(checked(sqlite3_column_double(s, 2), "pv", k));
     if (has_sp) {
       if (sqlite3_column_int(s, 6) != 0) {
         sp_ok = false;
         ++sp_bad;
+        sp.push_back(sqlite3_column_double(s, 3));  // left out below
+      } else {
+        sp.push_back(checked(sqlite3_column_double(s, 3), "sp", k));
       }
-      sp.push_back(sqlite3_column_double(s, 3));
     }
     if (has_mv) {
       if (sqlite3_column_int(s, 8) != 0) {
         mv_ok = false;
         ++mv_bad;
+        mv.push_back(sqlite3_column_double(s, 7));
+      } else {
+        mv.push_back(checked(sqlite3_column_double(s, 7), "mv", k));
       }
-      mv.push_back(sqlite3_column_double(s, 7));
     }
   }
   sqlite3_finalize(s);

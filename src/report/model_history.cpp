@@ -60,7 +60,51 @@ double num_of(const nlohmann::json& j) {
   return j.is_number() ? j.get<double>() : std::nan("");
 }
 
+HistoryEntry entry_of(const nlohmann::json& e) {
+  HistoryEntry h;
+  h.model = e.at("model").get<std::string>();
+  h.fitness_percent = num_of(e.value("fitness_percent", nlohmann::json()));
+  h.validation_fitness_percent = num_of(e.value("validation_fitness_percent", nlohmann::json()));
+  for (const auto& p : e.value("parameters", nlohmann::json::array()))
+    h.parameters.push_back(
+        {p.at("name").get<std::string>(), p.at("value").get<double>(), p.value("unit", "")});
+  h.na = e.value("na", 0);
+  h.nb = e.value("nb", 0);
+  h.nk = e.value("nk", 0);
+  h.command = e.value("command", "");
+  h.time = e.value("time", "");
+  return h;
+}
+
+nlohmann::json json_of(const HistoryEntry& h) {
+  nlohmann::json p = nlohmann::json::array();
+  for (const auto& v : h.parameters)
+    p.push_back({{"name", v.name}, {"value", v.value}, {"unit", v.unit}});
+  return {{"model", h.model},
+          {"fitness_percent", num(h.fitness_percent)},
+          {"validation_fitness_percent", num(h.validation_fitness_percent)},
+          {"parameters", p},
+          {"na", h.na},
+          {"nb", h.nb},
+          {"nk", h.nk},
+          {"command", h.command},
+          {"time", h.time}};
+}
+
 }  // namespace
+
+std::string history_entry_to_json(const HistoryEntry& h) {
+  return json_of(h).dump();
+}
+
+HistoryEntry history_entry_from_json(const std::string& text, const std::string& where) {
+  try {
+    return entry_of(nlohmann::json::parse(text));
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(where + ": not a valvediag model history entry (" +
+                             std::string(e.what()) + ")");
+  }
+}
 
 std::vector<HistoryEntry> load_history(const std::string& path) {
   std::error_code ec;
@@ -72,22 +116,7 @@ std::vector<HistoryEntry> load_history(const std::string& path) {
   std::vector<HistoryEntry> out;
   try {
     const auto j = nlohmann::json::parse(f);
-    for (const auto& e : j.at("entries")) {
-      HistoryEntry h;
-      h.model = e.at("model").get<std::string>();
-      h.fitness_percent = num_of(e.value("fitness_percent", nlohmann::json()));
-      h.validation_fitness_percent =
-          num_of(e.value("validation_fitness_percent", nlohmann::json()));
-      for (const auto& p : e.value("parameters", nlohmann::json::array()))
-        h.parameters.push_back(
-            {p.at("name").get<std::string>(), p.at("value").get<double>(), p.value("unit", "")});
-      h.na = e.value("na", 0);
-      h.nb = e.value("nb", 0);
-      h.nk = e.value("nk", 0);
-      h.command = e.value("command", "");
-      h.time = e.value("time", "");
-      out.push_back(std::move(h));
-    }
+    for (const auto& e : j.at("entries")) out.push_back(entry_of(e));
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(path + ": not a valvediag model history (" + std::string(e.what()) +
                              "); move it away to start a new history");
@@ -101,20 +130,7 @@ std::size_t append_history(const std::string& path, const std::vector<HistoryEnt
   nlohmann::json j;
   j["format"] = "valvediag model history 1";
   j["entries"] = nlohmann::json::array();
-  for (const auto& h : all) {
-    nlohmann::json p = nlohmann::json::array();
-    for (const auto& v : h.parameters)
-      p.push_back({{"name", v.name}, {"value", v.value}, {"unit", v.unit}});
-    j["entries"].push_back({{"model", h.model},
-                            {"fitness_percent", num(h.fitness_percent)},
-                            {"validation_fitness_percent", num(h.validation_fitness_percent)},
-                            {"parameters", p},
-                            {"na", h.na},
-                            {"nb", h.nb},
-                            {"nk", h.nk},
-                            {"command", h.command},
-                            {"time", h.time}});
-  }
+  for (const auto& h : all) j["entries"].push_back(json_of(h));
   const auto dir = std::filesystem::path(path).parent_path();
   if (!dir.empty() && !std::filesystem::is_directory(dir)) {
     std::error_code ec;

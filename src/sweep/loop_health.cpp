@@ -60,6 +60,30 @@ void remove_line(std::vector<double>& x) {
   for (std::size_t k = 0; k < x.size(); ++k) x[k] -= xm + slope * (static_cast<double>(k) - tm);
 }
 
+// A sample a million times the signal's usual size (its median, the spread of its middle 98 %,
+// or 1 unit): below the readers' 1e12 bound, yet no measurement. Left in, it stretches OP's span
+// so that every real move falls within one level and the record ends as "not enough data"
+// without saying why. "" when there is none; else the first such sample, named.
+std::string spike_in(const std::vector<double>& v, const std::vector<double>& t, const char* name) {
+  if (v.size() < 3) return "";
+  std::vector<double> s(v);
+  auto at = [&](double q) {
+    const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(s.size() - 1));
+    std::nth_element(s.begin(), s.begin() + k, s.end());
+    return s[static_cast<std::size_t>(k)];
+  };
+  const double lo = at(0.01), mid = at(0.5), hi = at(0.99);
+  const double usual = std::max({std::abs(mid), hi - lo, 1.0});
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (std::abs(v[i] - mid) > 1e6 * usual)
+      return strprintf(
+          "%s sample %zu (t = %.6g s) is %.6g, a million times its usual size (98 %% of it lies "
+          "in %.6g .. %.6g): a spike, a historian's bad-value marker or a corrupt cell; remove "
+          "that row or fill it in",
+          name, i + 1, t[i], v[i], lo, hi);
+  return "";
+}
+
 }  // namespace
 
 LoopHealth loop_health(const LoopData& d, const OpRange& range) {
@@ -109,6 +133,9 @@ LoopHealth loop_health(const LoopData& d, const OpRange& range) {
 }
 
 std::string unusable_reason(const LoopData& d, const LoopHealth& h, std::size_t min_samples) {
+  for (const auto& [v, name] : {std::pair{&d.op, "OP"}, std::pair{&d.pv, "PV"},
+                                std::pair{&d.sp, "SP"}, std::pair{&d.mv, "MV"}})
+    if (std::string s = spike_in(*v, d.t, name); !s.empty()) return s;
   if (d.pv.size() != d.size())
     return "no PV in the record (OP only): the loop-health figures come from OP; a model of the "
            "valve needs PV";

@@ -2,7 +2,10 @@
 // never next to the data, and a report is written only where --out says. Each command runs with
 // HOME / XDG_STATE_HOME pointed at an empty folder and the folder trees are compared.
 #include <doctest/doctest.h>
+#include <sqlite3.h>
+#include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -11,6 +14,7 @@
 #include <vector>
 
 #include "../common/run_cli.hpp"
+#include "../io/mat_fixtures.hpp"
 
 namespace fs = std::filesystem;
 
@@ -204,4 +208,130 @@ TEST_CASE("a junk history or no usable state directory: the fit's summary, exit 
   const auto lad = vd({"ladder", csv}, {"-HOME", "-XDG_STATE_HOME"});
   CHECK(lad.status == 2);
   CHECK(lad.out.find("--history FILE") != std::string::npos);
+}
+
+namespace {
+
+// The first column of the first row of `sql` in `db`, read-only; -1 when there is none.
+long long sql_count(const fs::path& db, const std::string& sql) {
+  sqlite3* h = nullptr;
+  long long n = -1;
+  if (sqlite3_open_v2(db.c_str(), &h, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK) {
+    sqlite3_stmt* s = nullptr;
+    if (sqlite3_prepare_v2(h, sql.c_str(), -1, &s, nullptr) == SQLITE_OK &&
+        sqlite3_step(s) == SQLITE_ROW)
+      n = sqlite3_column_int64(s, 0);
+    sqlite3_finalize(s);
+  }
+  sqlite3_close(h);
+  return n;
+}
+
+// A recording with loop runs_2 (400 samples of a sticky loop), as `import` stores it.
+fs::path recording() {
+  fresh_root();
+  const std::string mat = (kRoot / "data" / "runs.mat").string();
+  valvediag::test::write_runs_file(mat);
+  const fs::path db = kRoot / "data" / "site.sqlite";
+  const auto i = vd({"import", mat, "--loop", "runs(2)", "--db", db.string()}, {});
+  REQUIRE(i.status == 0);
+  return db;
+}
+
+}  // namespace
+
+TEST_CASE("a recorded loop's history lives in its recording, keyed by run, loop and reading") {
+  const fs::path db = recording();
+  const std::string d = db.string();
+  const std::vector<std::string> env{"HOME=" + (kRoot / "home").string(), "-XDG_STATE_HOME"};
+  const std::string table = "model history: " + d + " (table model_history, ";
+  const auto lin = vd({"fit", "--db", d, "--loop", "runs_2", "--model", "linear"}, env);
+  INFO(lin.out);
+  REQUIRE(lin.status == 0);
+  CHECK(lin.out.find(table + "1 fit)") != std::string::npos);
+  const auto diag =
+      vd({"diagnose", "--db", d, "--loop", "runs_2", "--candidates", "stiction"}, env);
+  INFO(diag.out);
+  CHECK(diag.status == 0);
+  const long long after_diag = sql_count(db, "SELECT COUNT(*) FROM model_history");
+  CHECK(after_diag >= 2);
+  CHECK(diag.out.find(table + std::to_string(after_diag) + " fits)") != std::string::npos);
+  // fit --add starts from the recording's last model.
+  const auto add = vd({"fit", "--db", d, "--loop", "runs_2", "--add", "deadband"}, env);
+  INFO(add.out);
+  CHECK(add.out.find("note: starting from the last model of this data") != std::string::npos);
+  CHECK(add.out.find("(no history yet)") == std::string::npos);
+  const auto lad = vd({"ladder", "--db", d, "--loop", "runs_2"}, env);
+  CHECK(lad.status == 0);
+  CHECK(lad.out.find("linear") != std::string::npos);
+  CHECK(lad.out.find("deadband") != std::string::npos);
+  // Another part of the run is another history; "10" and "10.0" are the same part.
+  const auto part =
+      vd({"fit", "--db", d, "--loop", "runs_2", "--from", "10", "--model", "linear"}, env);
+  CHECK(part.out.find(table + "1 fit)") != std::string::npos);
+  const auto same =
+      vd({"fit", "--db", d, "--loop", "runs_2", "--from", "10.0", "--model", "linear"}, env);
+  CHECK(same.out.find(table + "2 fits)") != std::string::npos);
+  CHECK(sql_count(db,
+                  "SELECT COUNT(*) FROM model_history WHERE reading = '--from 10' AND "
+                  "loop = 'runs_2' AND run_id = 1") == 2);
+  CHECK(sql_count(db, "SELECT version FROM schema_versions WHERE component = 'model_history'") ==
+        1);
+  // Nothing in the state directory; --history FILE and --no-history as for any data.
+  CHECK(fs::is_empty(kRoot / "home"));
+  const long long rows = sql_count(db, "SELECT COUNT(*) FROM model_history");
+  const std::string mine = (kRoot / "out" / "mine.json").string();
+  const auto f =
+      vd({"fit", "--db", d, "--loop", "runs_2", "--model", "linear", "--history", mine}, env);
+  CHECK(history_of(f.out) == mine);
+  CHECK(
+      vd({"fit", "--db", d, "--loop", "runs_2", "--model", "linear", "--no-history"}, env).status ==
+      0);
+  CHECK(sql_count(db, "SELECT COUNT(*) FROM model_history") == rows);
+  CHECK(fs::is_empty(kRoot / "home"));
+}
+
+TEST_CASE("a busy or read-only recording: the history goes to the state directory, a warning") {
+  const fs::path db = recording();
+  const std::string d = db.string();
+  const std::vector<std::string> env{"HOME=" + (kRoot / "home").string(), "-XDG_STATE_HOME"};
+  const std::string state = (kRoot / "home" / ".local" / "state" / "valvediag").string();
+  CHECK(vd({"fit", "--db", d, "--loop", "runs_2", "--model", "linear"}, env).status == 0);
+  {
+    // Another process holds the write lock (a database browser's open transaction).
+    sqlite3* h = nullptr;
+    REQUIRE(sqlite3_open(db.c_str(), &h) == SQLITE_OK);
+    REQUIRE(sqlite3_exec(h, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK);
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto r = vd({"fit", "--db", d, "--loop", "runs_2", "--model", "stiction"}, env);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    sqlite3_exec(h, "ROLLBACK", nullptr, nullptr, nullptr);
+    sqlite3_close(h);
+    INFO(r.out);
+    CHECK(r.status == 0);
+    CHECK(r.out.find("fitness:") != std::string::npos);
+    CHECK(r.out.find("warning: " + d + ": database busy") != std::string::npos);
+    CHECK(r.out.find("the model history goes to the state directory instead") != std::string::npos);
+    CHECK(history_of(r.out).starts_with(state + "/history/"));
+    CHECK(r.out.find("(1 fit)") != std::string::npos);
+    CHECK(s < 60.0);  // the fit itself; the wait for the lock is a second
+  }
+  CHECK(sql_count(db, "SELECT COUNT(*) FROM model_history") == 1);
+  // Nothing lost: the ladder holds both, in time order.
+  const auto lad = vd({"ladder", "--db", d, "--loop", "runs_2"}, env);
+  INFO(lad.out);
+  CHECK(lad.status == 0);
+  const auto lin = lad.out.find("linear"), sti = lad.out.find("stiction");
+  CHECK(lin != std::string::npos);
+  CHECK(sti != std::string::npos);
+  CHECK(lin < sti);
+  if (geteuid() != 0) {  // root writes a write-protected file
+    fs::permissions(db, fs::perms::owner_read);
+    const auto r = vd({"fit", "--db", d, "--loop", "runs_2", "--model", "deadband"}, env);
+    fs::permissions(db, fs::perms::owner_read | fs::perms::owner_write);
+    INFO(r.out);
+    CHECK(r.status == 0);
+    CHECK(r.out.find("warning: " + d + ": read-only") != std::string::npos);
+    CHECK(r.out.find("(2 fits)") != std::string::npos);
+  }
 }

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "../common/run_cli.hpp"
+#include "../common/sqlite_exec.hpp"
 #include "../io/mat_fixtures.hpp"
 
 namespace fs = std::filesystem;
@@ -297,4 +298,71 @@ TEST_CASE("a damaged .mat file is a clear error, never a crash of the command") 
       CHECK(has(r.out, "the file is damaged"));
     }
   }
+}
+
+TEST_CASE("a .mat loop and a recording obey --max-rows and the 1e12 bound as a CSV file does") {
+  const std::string mat = tmp("capped.mat");
+  valvediag::test::write_runs_file(mat);
+  const CliResult m = run({"fit", mat, "--loop", "runs(2)", "--max-rows", "100", "--no-history"});
+  INFO(m.out);
+  CHECK(m.status == 2);
+  CHECK(has(m.out,
+            "loop 'runs(2)': field op has 400 samples, more than 100, the --max-rows limit "
+            "that keeps memory bounded"));
+  const std::string db = tmp("capped.sqlite");
+  for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
+  REQUIRE(run({"import", mat, "--loop", "runs(2)", "--db", db}).status == 0);
+  const CliResult d = run({"fit", "--db", db, "--loop", "runs_2", "--max-rows", "100"});
+  INFO(d.out);
+  CHECK(d.status == 2);
+  CHECK(has(d.out, db + ": run 1, loop runs_2: more than 100 rows in the range, the --max-rows "
+                        "limit that keeps memory bounded"));
+  CHECK(has(d.out, "or a shorter range (--from/--to)"));
+  // Within the cap: read as before.
+  CHECK(
+      run(with({"fit", "--db", db, "--loop", "runs_2", "--max-rows", "400"}, kSmallGrid)).status ==
+      0);
+
+  // A stored value no instrument gives (a corrupt row): refused naming run, loop and tick, by
+  // the analysis commands and in a sweep.
+  valvediag::test::exec_sql(db, "UPDATE samples SET op = 5e13 WHERE tick = 10");
+  const std::string where =
+      db + ": column 'op': run 1, loop runs_2, tick 10 (t = 5 s): 5e+13 is no measurement";
+  const CliResult f = run(with({"fit", "--db", db, "--loop", "runs_2"}, kSmallGrid));
+  INFO(f.out);
+  CHECK(f.status == 2);
+  CHECK(has(f.out, where));
+  const std::string site = tmp("capped.toml");
+  std::ofstream(site) << "[[bus]]\nname = \"plc\"\nprotocol = \"modbus-tcp\"\n"
+                         "controller = \"tcp://127.0.0.1:1\"\n"
+                         "[[loop]]\nname = \"runs_2\"\nbus = \"plc\"\nsample_period = 0.5\n"
+                         "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
+                         "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\n";
+  const CliResult s = run({"sweep", "--config", site, "--db", db, "--window", "1h"});
+  INFO(s.out);
+  CHECK(s.status == 0);
+  CHECK(has(line_with(s.out, "runs_2 "), "error"));
+  CHECK(has(s.out, where));
+}
+
+TEST_CASE("an OP spike below 1e12 in a CSV file: the verdict names the sample") {
+  const std::string csv = tmp("spike.csv"), spiked = tmp("spiked.csv");
+  REQUIRE(run({"simulate", "--scenario", "paper-ex1-linear", "--samples", "600", "--out", csv})
+              .status == 0);
+  std::ifstream in(csv);
+  std::ofstream out(spiked);
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (n == 301)
+      line = line.substr(0, line.find(',')) + ",9e11" +
+             line.substr(line.find(',', line.find(',') + 1));
+    out << line << "\n";
+  }
+  out.close();
+  const CliResult r = run({"diagnose", spiked, "--no-history"});
+  INFO(r.out);
+  CHECK(r.status == 0);
+  CHECK(has(line_with(r.out, "verdict:"),
+            "not-enough-data: OP sample 300 (t = 149.5 s) is 9e+11, a million times its usual "
+            "size"));
 }

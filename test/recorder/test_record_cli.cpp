@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -179,6 +180,33 @@ TEST_CASE("a config error is reported with file and line before any bus traffic"
   CHECK(r.out.find("must be \"holding\" or \"input\"") != std::string::npos);
   CHECK(plc.connections() == 0);
   CHECK(!fs::exists(kTmp / "bad.sqlite"));
+}
+
+TEST_CASE("record on a database busy at its start says so and stores every sample once free") {
+  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  plc.start();
+  const std::string site = write_site("busy-start.toml", plc.port(), 0.05);
+  const std::string db = fresh("busy-start.sqlite");
+  std::atomic<bool> taken{false};
+  std::thread locker([&] {  // another program's open write transaction, for 3 s
+    sqlite3* c = nullptr;
+    sqlite3_open(db.c_str(), &c);
+    taken = sqlite3_exec(c, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK;
+    std::this_thread::sleep_for(std::chrono::seconds(3));
+    sqlite3_exec(c, "COMMIT", nullptr, nullptr, nullptr);
+    sqlite3_close(c);
+  });
+  while (!taken.load()) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const Result r = run({"record", "--config", site, "--db", db, "--duration", "2s", "--quiet"});
+  locker.join();
+  INFO(r.out);
+  CHECK((r.status == 0 || r.status == 4));
+  CHECK(r.out.find("note: " + db + " is busy: another process holds SQLite's write lock") !=
+        std::string::npos);
+  CHECK(r.out.find("stored once it is free (up to 90 s)") != std::string::npos);
+  CHECK(r.out.find("FIC101: 40 samples") != std::string::npos);
+  CHECK(scalar(db, "SELECT count(*) FROM samples") == 40);
+  CHECK(scalar(db, "SELECT min(tick) FROM samples") == 0);
 }
 
 TEST_CASE("record exits 4 when errors happened, 0 when not; export and fit read the database") {

@@ -17,6 +17,7 @@
 #include "valvediag/recorder_lock.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/sim_plc.hpp"
+#include "valvediag/utc_time.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;
@@ -58,6 +59,23 @@ double wall_now() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
+// The set-up most cases share (TEST_CASE_FIXTURE): the simulated PLC at 10x, started, and the
+// recorder's options.
+struct SimRig {
+  SimPlc plc{load_site_config(kSimSite), SimPlcOptions{10.0, 0}};
+  RecorderOptions o;
+  SimRig() { plc.start(); }
+  // A fresh database `name` for a run of `duration_s` (nullopt: until stopped) over `loops`
+  // (empty: all); its path.
+  std::string fresh(const std::string& name, std::optional<double> duration_s,
+                    std::vector<std::string> loops = {}) {
+    o.db_path = fresh_db(name);
+    o.duration_s = duration_s;
+    o.loops = std::move(loops);
+    return o.db_path;
+  }
+};
+
 bool no_writes(const SimPlc& plc) {
   const auto c = plc.function_counts();
   for (std::size_t fc = 0; fc < c.size(); ++fc)
@@ -66,13 +84,8 @@ bool no_writes(const SimPlc& plc) {
 }
 }  // namespace
 
-TEST_CASE("records one row per tick per loop, all good, and never writes") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("basic");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 1.0;
+TEST_CASE_FIXTURE(SimRig, "records one row per tick per loop, all good, and never writes") {
+  const std::string db = fresh("basic", 1.0);
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   int statuses = 0;
@@ -109,16 +122,10 @@ TEST_CASE("records one row per tick per loop, all good, and never writes") {
   CHECK_THROWS_AS(Recorder(fast_site(plc.port()), unknown, make_bus), std::invalid_argument);
 }
 
-TEST_CASE("server down at start: comm-error rows, backoff, records once it is up") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
+TEST_CASE_FIXTURE(SimRig, "server down at start: comm-error rows, backoff, records once it is up") {
   plc.restart(1.0);  // away for the first second of the recording
   const double t_back = wall_now() + 1.0;
-  const std::string db = fresh_db("down_at_start");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 3.0;
-  o.loops = {"FIC101"};
+  const std::string db = fresh("down_at_start", 3.0, {"FIC101"});
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   const RecorderStatus s = rec.run(stop);
@@ -139,14 +146,10 @@ TEST_CASE("server down at start: comm-error rows, backoff, records once it is up
   CHECK(no_writes(plc));
 }
 
-TEST_CASE(
+TEST_CASE_FIXTURE(
+    SimRig,
     "server restarted while recording: keeps running, reconnects, marks the gap, loses nothing") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("restart");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 4.0;
+  const std::string db = fresh("restart", 4.0);
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   double t_back = 0.0;
@@ -231,12 +234,8 @@ TEST_CASE("timeouts, exceptions and garbled replies are counted and flagged, nev
   CHECK(no_writes(plc));
 }
 
-TEST_CASE("Ctrl-C (the stop flag) ends a run without a duration cleanly") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("stop");
-  RecorderOptions o;
-  o.db_path = db;
+TEST_CASE_FIXTURE(SimRig, "Ctrl-C (the stop flag) ends a run without a duration cleanly") {
+  const std::string db = fresh("stop", std::nullopt);
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false};
   std::thread stopper([&] {
@@ -250,16 +249,10 @@ TEST_CASE("Ctrl-C (the stop flag) ends a run without a duration cleanly") {
   CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'stopped'") == 1);
 }
 
-TEST_CASE("recorded values equal the simulated loop's samples, tick for tick") {
+TEST_CASE_FIXTURE(SimRig, "recorded values equal the simulated loop's samples, tick for tick") {
   // The PLC steps paper-ex1 every 50 ms (10x); the recorder polls every 50 ms half-way between
   // steps, so recorded tick i is simulation step k0 + i, to float32 precision.
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("exact");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 1.0;
-  o.loops = {"FIC101"};
+  const std::string db = fresh("exact", 1.0, {"FIC101"});
   const auto P = std::chrono::duration<double>(kPeriod);
   const double k0 = std::ceil(
       (std::chrono::steady_clock::now() + std::chrono::milliseconds(200) - plc.started()) / P);
@@ -478,12 +471,15 @@ TEST_CASE("recordings from before table versions stay readable; newer tables are
 }
 
 namespace {
-// Another process's writer: once the recorder has stored some samples, holds SQLite's write
-// lock on `db` for `hold_s`; `taken` says it got it (a thread of the test stands in for the other
-// process: SQLite locks per connection).
-std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bool>& taken) {
-  return std::thread([db, hold_s, &taken] {
-    if (!test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 10.0))
+// Another process's writer: once the recorder has stored `after_samples` samples (0: at once),
+// holds SQLite's write lock on `db` for `hold_s`; `taken` says it got it (a thread of the test
+// stands in for the other process: SQLite locks per connection).
+std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bool>& taken,
+                            int after_samples = 10) {
+  return std::thread([db, hold_s, &taken, after_samples] {
+    if (after_samples > 0 &&
+        !test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= after_samples; },
+                        10.0))
       return;
     sqlite3* c = nullptr;
     sqlite3_open(db.c_str(), &c);
@@ -499,17 +495,13 @@ std::thread hold_write_lock(const std::string& db, double hold_s, std::atomic<bo
 }
 }  // namespace
 
-TEST_CASE("a write lock held 8 s by another process: samples wait in memory, nothing is lost") {
+TEST_CASE_FIXTURE(SimRig,
+                  "a write lock held 8 s by another process: samples wait in memory, nothing is "
+                  "lost") {
   // Before, the recorder gave up after SQLite's 5 s busy timeout ("inserting samples: not an
   // error") and kept what it had stored until then. Locks of up to a minute are the designed
   // bound (busy_limit_s, 90 s by default); 8 s exceeds the old timeout without a minute's wait.
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("busy");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 11.0;
-  o.loops = {"FIC101"};
+  const std::string db = fresh("busy", 11.0, {"FIC101"});
   o.status_interval_s = 0.2;
   Recorder rec(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false}, taken{false};
@@ -542,14 +534,10 @@ TEST_CASE("a write lock held 8 s by another process: samples wait in memory, not
   CHECK(no_writes(plc));
 }
 
-TEST_CASE("a write lock held past the recorder's limit stops it with a message, never a hang") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("busy_limit");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 30.0;
-  o.loops = {"FIC101"};
+TEST_CASE_FIXTURE(SimRig,
+                  "a write lock held past the recorder's limit stops it with a message, never a "
+                  "hang") {
+  const std::string db = fresh("busy_limit", 30.0, {"FIC101"});
   o.busy_limit_s = 1.5;  // the test's stand-in for the 90 s default
   auto rec = std::make_unique<Recorder>(fast_site(plc.port()), o, make_bus);
   std::atomic<bool> stop{false}, taken{false};
@@ -576,14 +564,66 @@ TEST_CASE("a write lock held past the recorder's limit stops it with a message, 
   CHECK(no_writes(plc));
 }
 
-TEST_CASE("a second recorder on a database is refused, naming the first; free once it ends") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
-  plc.start();
-  const std::string db = fresh_db("two");
-  RecorderOptions o;
-  o.db_path = db;
-  o.duration_s = 0.5;
-  o.loops = {"FIC101"};
+TEST_CASE_FIXTURE(SimRig,
+                  "a write lock held when the recorder starts: it polls at once and stores all "
+                  "later") {
+  // Before, the recorder failed after SQLite's 5 s busy timeout and recorded nothing. Now the
+  // rows wait in memory from the first tick, as when the database is busy mid-run.
+  for (const bool existing : {true, false}) {
+    CAPTURE(existing);
+    fresh(existing ? "busy_start" : "busy_start_new", 6.0, {"FIC101"});
+    if (existing) {
+      // A recording with one run left `recording` by a killed recorder.
+      RecorderOptions first = o;
+      first.duration_s = 0.3;
+      Recorder r(fast_site(plc.port()), first, make_bus);
+      std::atomic<bool> stop{false};
+      r.run(stop);
+      exec_sql(o.db_path, "UPDATE runs SET status = 'recording'");
+    }
+    std::atomic<bool> taken{false};
+    std::thread locker = hold_write_lock(o.db_path, 4.0, taken, 0);
+    REQUIRE(test::wait_for([&] { return taken.load(); }, 5.0));
+    // Two seconds before the lock goes: the run's start must come before it.
+    const std::string before_release = utc_timestamp(std::time(nullptr) + 2);
+    Recorder rec(fast_site(plc.port()), o, make_bus);
+    CHECK_FALSE(rec.database_ready());
+    std::atomic<bool> stop{false};
+    const auto t0 = std::chrono::steady_clock::now();
+    const RecorderStatus s = rec.run(stop);
+    const double took =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    locker.join();
+    const std::string db = o.db_path;
+    const std::string run = std::to_string(rec.run_id());
+    CHECK(rec.run_id() == (existing ? 2 : 1));
+    CHECK(took < 12.0);
+    CHECK(s.loops[0].rows == 120);
+    CHECK(s.committed == 120);
+    CHECK(s.busy_times == 1);
+    CHECK(s.busy_longest_s >= 3.0);
+    CHECK(s.waiting_peak >= 60);
+    const std::string in_run =
+        " FROM samples JOIN loops ON loops.id = samples.loop_id WHERE loops.run_id = " + run;
+    CHECK(scalar(db, "SELECT count(*)" + in_run) == 120);
+    CHECK(scalar(db, "SELECT min(tick)" + in_run) == 0);  // from the first tick
+    CHECK(scalar(db, "SELECT max(tick) + 1 - count(*)" + in_run) == 0);
+    CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed' AND id = " + run) == 1);
+    // The run started when the recorder did, not when the lock was released.
+    CHECK(scalar(db, "SELECT started_utc <= '" + before_release +
+                         "' FROM runs WHERE id = " + run) == 1);
+    if (existing) {
+      CHECK(rec.interrupted_runs() == std::vector<std::int64_t>{1});
+      CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'interrupted' AND id = 1") == 1);
+    }
+  }
+  CHECK(no_writes(plc));
+}
+
+TEST_CASE_FIXTURE(SimRig,
+                  "a second recorder on a database is refused, naming the first; free once it "
+                  "ends") {
+  const std::string db = fresh("two", 0.5, {"FIC101"});
   const std::string lock = fs::weakly_canonical(db).string() + ".lock";
   {
     Recorder first(fast_site(plc.port()), o, make_bus);

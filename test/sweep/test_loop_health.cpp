@@ -101,6 +101,21 @@ TEST_CASE("unusable records are named with what is wrong") {
   }
   CHECK(unusable_reason(good, loop_health(good)) == "");
 
+  // One OP cell of 9e11, below the readers' 1e12 bound: named, not "does not excite the valve".
+  LoopData spike = good;
+  spike.op[300] = 9e11;
+  const std::string sp = unusable_reason(spike, loop_health(spike));
+  CHECK(sp.find("OP sample 301 (t = 300 s) is 9e+11, a million times its usual size") == 0);
+  CHECK(sp.find("remove that row or fill it in") != std::string::npos);
+  LoopData pv_spike = good;
+  pv_spike.pv[7] = -5e8;  // 1e6 x its usual size, about 50
+  CHECK(unusable_reason(pv_spike, loop_health(pv_spike)).find("PV sample 8 (t = 7 s) is -5e+08") ==
+        0);
+  // A valve resting shut for most of the record, then opening: no spike.
+  LoopData rests = good;
+  for (std::size_t k = 0; k < 1100; ++k) rests.op[k] = 0.0;
+  CHECK(unusable_reason(rests, loop_health(rests)).find("sample") == std::string::npos);
+
   LoopData shortd = good;
   shortd.t.resize(150);
   shortd.op.resize(150);
