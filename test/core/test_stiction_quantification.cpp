@@ -442,7 +442,12 @@ TEST_CASE("an asymmetric valve in closed loop: the region table shows where it s
   s.loop.valve = {PositionDependentStiction({{40.0, 8.0, 3.0}, {60.0, 3.0, 1.0}})};
   s.loop.disturbances = {};
   s.loop.setpoint = {{0.0, 50.0}, {100.0, 30.0}, {1000.0, 70.0}, {2000.0, 30.0}, {2600.0, 50.0}};
-  for (std::uint64_t seed : {31, 32}) {
+#ifdef VALVEDIAG_SANITIZED
+  const std::uint64_t seeds[] = {31};  // the same path; the second seed's figures in Release
+#else
+  const std::uint64_t seeds[] = {31, 32};
+#endif
+  for (std::uint64_t seed : seeds) {
     CAPTURE(seed);
     const LoopData d = run_scenario(s, seed, 3000);
     const IdentificationResult r = identify(d.op, d.pv, case_fit_options("fopdt"));

@@ -143,11 +143,14 @@ TEST_CASE("hidden effects are named first, with a clear gain and overlapping int
   std::printf("\n%-28s %-15s %4s %-15s %-15s %-5s %8s %8s %7s\n", "loop", "hidden effect", "seed",
               "first finding", "second", "flag", "val gain", "gain", "overlap");
 #ifdef VALVEDIAG_SANITIZED
-  const std::size_t stride = 4;  // a sample under the sanitizers: the figures need every case
+  // A sample under the sanitizers (the figures need every case); it holds the two records the
+  // actuator-lag case below reads, so their diagnoses run once.
+  const std::size_t first_case = 1, stride = 4;
 #else
-  const std::size_t stride = 1;
+  const std::size_t first_case = 0, stride = 1;
 #endif
-  for (std::size_t i = 0; i < all.size(); i += stride) {
+  std::size_t runs = 0;
+  for (std::size_t i = first_case; i < all.size(); i += stride, ++runs) {
     const auto& c = all[i];
     CAPTURE(c.label);
     CAPTURE(c.seed);
@@ -207,7 +210,7 @@ TEST_CASE("hidden effects are named first, with a clear gain and overlapping int
     }
     std::printf("\n");
   }
-  const double n = static_cast<double>((all.size() + stride - 1) / stride);
+  const double n = static_cast<double>(runs);
   std::printf(
       "hidden effect first in %d of %zu loops, second behind an indistinguishable one in %d, "
       "an equivalent effect first in %d, known confusions %d; mean gain of adding it: %+.2f "
@@ -295,7 +298,12 @@ TEST_CASE("paper Example 1 over 50 minutes: `linear` has a stable fit, stiction 
 }
 
 TEST_CASE("a loop with no valve problem is not diagnosed with stiction") {
-  for (std::uint64_t seed : {1u, 2u}) {
+#ifdef VALVEDIAG_SANITIZED
+  const std::uint64_t seeds[] = {1};  // the same path; the second seed's figures in Release
+#else
+  const std::uint64_t seeds[] = {1, 2};
+#endif
+  for (std::uint64_t seed : seeds) {
     CAPTURE(seed);
     const LoopData d = run_scenario(scenario_by_name("linear-clean"), seed, 0);
     const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("linear"));
@@ -430,10 +438,11 @@ TEST_CASE("held valve: how much of a memory trial's held-out gain its predicted 
   REQUIRE(load);
   CHECK(std::isnan(load->held_valve_validation_fitness_percent));
   CHECK(held_valve_note(*load).empty());
-  // A stick-slip cycle: the held-out slips are what the trial gains.
-  const LoopData ex1 = run_scenario(scenario_by_name("paper-ex1"), 1, 0);
-  const Diagnosis de = diagnose(ex1.op, ex1.pv, ex1.sample_period(), parse_model_spec("linear"));
-  const Finding* he = find(de.last().findings, "stiction");
+  // A stick-slip cycle: the held-out slips are what the trial gains. (Paper Example 1, seed 1:
+  // the diagnosis shared with the cases above, of the same record.)
+  const Outcome& ex1 = outcome(
+      "paper-ex1 (He fs 8.4, fd 3.5)#1", [] { return named("paper-ex1"); }, 1);
+  const Finding* he = find(ex1.diagnosis.last().findings, "stiction");
   REQUIRE(he);
   CHECK(he->held_valve_validation_fitness_percent < he->trial_validation_fitness_percent - 50.0);
   CHECK(held_valve_note(*he).empty());

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <map>
 #include <string>
 
 #include "page_checks.hpp"
@@ -182,10 +183,20 @@ struct Fixture {
   }
 };
 
+// Several pages are drawn from the same record and fit: each is fitted once, and a case gets a
+// copy it may change.
+Fixture shared_fixture(const std::string& scenario, const std::string& model, std::size_t samples) {
+  static std::map<std::string, Fixture> made;
+  const std::string key = scenario + " " + model + " " + std::to_string(samples);
+  auto it = made.find(key);
+  if (it == made.end()) it = made.emplace(key, Fixture(scenario, model, samples)).first;
+  return it->second;
+}
+
 }  // namespace
 
 TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all text escaped") {
-  Fixture fx("paper-ex1", "preisach:general", 1500);
+  Fixture fx = shared_fixture("paper-ex1", "preisach:general", 1500);
   REQUIRE(!fx.where.intervals.empty());
   const HtmlReport r = html_report(fx.content());
   const std::string& h = r.html;
@@ -215,7 +226,7 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
 }
 
 TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
-  Fixture fx("paper-ex1", "preisach:general", 1500);
+  Fixture fx = shared_fixture("paper-ex1", "preisach:general", 1500);
   Diagnosis dg;
   dg.steps.push_back({fx.fit, fx.where, {}, {}});
   dg.limit_cycle.oscillating = true;
@@ -230,7 +241,7 @@ TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
 }
 
 TEST_CASE("a recorded valve position: its signature beside the model's, and the test's row") {
-  Fixture fx("paper-ex1", "preisach:general", 1500);
+  Fixture fx = shared_fixture("paper-ex1", "preisach:general", 1500);
   REQUIRE(fx.d.has_mv());
   Diagnosis dg;
   dg.steps.push_back({fx.fit, fx.where, {}, {}});
@@ -265,7 +276,7 @@ TEST_CASE("a model without a Preisach valve: a note in place of the triangle") {
 }
 
 TEST_CASE("gnuplot missing: an error, or the page with notes in place of the plots") {
-  Fixture fx("linear-clean", "linear", 1000);
+  Fixture fx = shared_fixture("linear-clean", "linear", 1000);
   ReportOptions o;
   o.gnuplot.program = "/nonexistent/gnuplot";
   CHECK_THROWS_AS(html_report(fx.content(), o), GnuplotMissing);
@@ -294,7 +305,7 @@ TEST_CASE("a long record stays small: plots are decimated") {
 }
 
 TEST_CASE("html_report refuses a fit that does not belong to the data") {
-  Fixture fx("linear-clean", "linear", 1000);
+  Fixture fx = shared_fixture("linear-clean", "linear", 1000);
   LoopData other = fx.d;
   other.t.resize(500);
   other.op.resize(500);
