@@ -81,15 +81,19 @@ void diagnose_and_report(const LoopData& d, const FitRun& run, const std::string
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     const auto& base = diag.steps.front().fit;
     if (std::isfinite(base.fitness_percent))
-      std::printf("  linear: %.2f %% estimation, %.2f %% validation; the best trial fits:\n",
-                  base.fitness_percent, base.validation_fitness_percent);
+      std::printf(
+          "  linear: %.2f %% estimation, %.2f %% validation; the best trial fits "
+          "(ranked by gain, the smaller of the two parts):\n",
+          base.fitness_percent, base.validation_fitness_percent);
     else  // gains are then counted from a fitness of 0 (the mean)
-      std::printf("  linear: no stable model on this record; the best trial fits:\n");
+      std::printf(
+          "  linear: no stable model on this record; the best trial fits (ranked by "
+          "gain, the smaller of the two parts):\n");
     const auto& findings = diag.steps.front().findings;
     for (std::size_t i = 0; i < findings.size() && i < 3; ++i)
-      std::printf("  %zu. + %-15s score %.2f, %+.2f points on validation\n", i + 1,
-                  findings[i].effect.c_str(), findings[i].score,
-                  findings[i].validation_gain_percent);
+      std::printf("  %zu. + %-15s %+.2f / %+.2f points (validation / estimation), score %.2f\n",
+                  i + 1, findings[i].effect.c_str(), findings[i].validation_gain_percent,
+                  findings[i].estimation_gain_percent, findings[i].score);
     for (std::size_t i = 1; i < diag.steps.size(); ++i) {
       const auto& f = diag.steps[i].fit;
       std::printf("  climbed to %s: %.2f %% estimation, %.2f %% validation\n",

@@ -62,10 +62,10 @@ void add_report(CLI::App& app, int& exit_code) {
       "another program) and embedded as SVG: the file has no scripts and no external links.\n"
       "The verdict is the loop's one verdict, as diagnose, sweep and demo give it (diagnose "
       "--auto\n"
-      "from linear), whatever model is shown; the model history only chooses the model shown.\n"
+      "from linear), whatever model is shown. By default the page shows the model the verdict\n"
+      "rests on; with --no-diagnose, the last model of the data's ladder, else preisach.\n"
       "Examples:\n"
-      "  valvediag report loop.csv --out report.html          (model: the last of the ladder,\n"
-      "                                                        else preisach)\n"
+      "  valvediag report loop.csv --out report.html          (model: the verdict's)\n"
       "  valvediag report loop.csv --model stiction --out report.html\n"
       "  valvediag report --db site.sqlite --loop FIC101 --out fic101.html\n"
       "  valvediag report loop.csv --no-diagnose --no-plots --out quick.html");
@@ -84,7 +84,8 @@ void add_report(CLI::App& app, int& exit_code) {
   const char* g = "Report";
   cmd->add_option("--model", a->model,
                   "the model to fit and show, e.g. preisach, stiction+saturation (default: the "
-                  "last model of the data's ladder, else preisach)")
+                  "model the verdict rests on; with --no-diagnose the last model of the data's "
+                  "ladder, else preisach)")
       ->group(g);
   // Never a default beside the data: a shared folder of exports is not ours to write in.
   cmd->add_option("--out", a->out, "the HTML file to write (required)")->group(g);
@@ -143,12 +144,26 @@ void add_report(CLI::App& app, int& exit_code) {
     for (const auto& n : notes) std::cout << "note: " << n << "\n";
     HistoryPlace history = history_place(a->hist, a->data, whole);
     auto ladder = read_history_or_warn(history);
+    // The loop's verdict for the header, the same for every command (loop_verdict.hpp): never
+    // from the model history.
+    LoopVerdict lv;
+    if (!a->no_diagnose)
+      lv = loop_verdict(whole,
+                        verdict_options(range, a->validate, a->keep_lead_in, whole.t.front()));
     if (!spec) {
-      spec = parse_model_spec(ladder.empty() ? "preisach:general" : ladder.back().model);
-      std::cout << "note: model " << to_string(*spec)
-                << (ladder.empty() ? " (no model history for this data yet)"
-                                   : " (the last model of this data's ladder)")
-                << "\n";
+      // The page explains its verdict: by default it shows the model the verdict rests on (the
+      // end of diagnose --auto's climb); without a verdict, the data's ladder's last model.
+      if (lv.judged()) {
+        spec = lv.diagnosis.last().fit.spec;
+        std::cout << "note: model " << to_string(*spec)
+                  << " (the model the verdict rests on; --model shows another)\n";
+      } else {
+        spec = parse_model_spec(ladder.empty() ? "preisach:general" : ladder.back().model);
+        std::cout << "note: model " << to_string(*spec)
+                  << (ladder.empty() ? " (no model history for this data yet)"
+                                     : " (the last model of this data's ladder)")
+                  << "\n";
+      }
     }
     const double Ts = d.sample_period();
     std::cout << "fitting " << to_string(*spec)
@@ -156,12 +171,6 @@ void add_report(CLI::App& app, int& exit_code) {
                                  : " and diagnosing it (trial fits of the missing effects); "
                                    "the verdict from diagnose --auto")
               << " ..." << std::endl;
-    // The loop's verdict for the header, the same for every command (loop_verdict.hpp): never
-    // from the model history, which only chose the model shown.
-    LoopVerdict lv;
-    if (!a->no_diagnose)
-      lv = loop_verdict(whole,
-                        verdict_options(range, a->validate, a->keep_lead_in, whole.t.front()));
     // The model shown is where the verdict's climb ended (a history that diagnose --auto wrote):
     // that climb is the diagnosis, not run again.
     const bool same = lv.judged() && lv.diagnosis.last().fit.spec == *spec;

@@ -57,7 +57,9 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
     o << "residual:  RMS " << num(s.residual.rms, 3) << ", white-noise level "
       << num(s.residual.noise_level, 3) << "\n";
   if (const std::string jn = judge_note(s); !jn.empty()) o << "judge:     " << jn << "\n";
-  o << "findings (most likely missing first):\n";
+  // The order is rank_by_wins' (diagnosis.cpp), not the score's: say what it is.
+  o << "findings (most likely missing first: a clearly larger gain on both parts, else fewer "
+       "parameters, else the higher score):\n";
   o << "  rank  effect          score  gain (val / est)      evidence\n";
   int rank = 0;
   for (const auto& f : s.findings) {

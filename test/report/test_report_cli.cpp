@@ -94,6 +94,19 @@ TEST_CASE("report on a simulated sticky loop: one self-contained page with every
   CHECK(has_plot(h2, "plot-preisach"));
 }
 
+// With no --model the page explains its verdict: it shows the model the verdict rests on (the end
+// of diagnose --auto's climb), not the ladder's last model or a bare Preisach plane.
+TEST_CASE("report without --model shows the model its verdict rests on") {
+  const std::string csv = sticky_loop("verdict-model.csv"), out = tmp("verdict-model.html");
+  const Run r = run("report " + csv + " --no-plots --no-history --out " + out);
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  CHECK(r.out.find("note: model stiction (the model the verdict rests on") != std::string::npos);
+  CHECK(r.out.find("verdict:   stiction") != std::string::npos);
+  const std::string h = slurp(out);
+  CHECK(h.find("<tr><th>model</th><td><code>stiction") != std::string::npos);
+}
+
 TEST_CASE("report: user errors exit 2 with a clear message and leave no file") {
   const std::string csv = sticky_loop("errors.csv");
   SUBCASE("bad --model names the vocabulary") {
