@@ -69,7 +69,11 @@ std::string recorder_summary(const RecorderStatus& s, const std::string& db, std
   for (const auto& [name, b] : s.buses)
     o << "  bus " << name << ": " << b.requests << " requests, " << b.errors << " failed ("
       << b.timeouts << " timeouts, " << b.exceptions << " exceptions, " << b.garbled
-      << " garbled), " << b.disconnects << " disconnects, " << b.reconnects << " reconnects\n";
+      << " garbled), " << b.disconnects << " disconnects, " << b.reconnects << " reconnects, "
+      << b.connect_attempts
+      << " connection attempt(s)"
+      // A bus that never answered sent no request: say why its loops hold comm-errors.
+      << (b.connected ? "" : "; not connected at the end (last error below)") << "\n";
   o << "  lateness of the reads: p50 " << ms(s.lateness_p50_s) << ", p99 " << ms(s.lateness_p99_s)
     << ", max " << ms(s.lateness_max_s) << "\n";
   if (s.busy_times > 0) {

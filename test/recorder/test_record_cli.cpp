@@ -261,6 +261,24 @@ TEST_CASE("record exits 4 when errors happened, 0 when not; export and fit read 
   CHECK(plc.write_requests() == 0);
 }
 
+// Nothing listens on port 1: no request is ever sent, so the bus line must say why its loop's
+// samples are all comm-errors (it read "0 requests, 0 failed" beside them).
+TEST_CASE("record against an unreachable PLC: the summary counts the failed connection attempts") {
+  const std::string site = write_site("unreachable.toml", 1, 0.1);
+  const Result r = run({"record", "--config", site, "--db", fresh("unreachable.sqlite"),
+                        "--duration", "1.5s", "--quiet"});
+  INFO(r.out);
+  CHECK(r.status == 4);
+  CHECK(r.out.find(" 0 good, ") != std::string::npos);
+  CHECK(r.out.find("bus plc: 0 requests, 0 failed") != std::string::npos);
+  const std::size_t at = r.out.find(" connection attempt(s); not connected at the end");
+  REQUIRE(at != std::string::npos);
+  // At least the first attempt and one after the backoff (500 ms at most) within 1.5 s.
+  const std::size_t from = r.out.rfind(' ', at - 1) + 1;
+  CHECK(std::stoi(r.out.substr(from, at - from)) >= 2);
+  CHECK(r.out.find("Connection refused") != std::string::npos);
+}
+
 TEST_CASE("sim-plc prints its free port, serves the recorder, and reports the function codes") {
   const fs::path out = kTmp / "simplc.txt";
   fs::remove(out);  // else the port of an earlier run may be read before the child truncates it
