@@ -19,7 +19,7 @@ std::string judge_note(const DiagnosisStep& s) {
   const KStepJudge& j = s.judge;
   if (j.horizon == 0) return "";
   return strprintf(
-      "gains are of %zu-step-ahead prediction (%.3g s) from the measured PV: the model "
+      "gains are of %zu-step-ahead prediction (%.5g s) from the measured PV: the model "
       "integrates, so its simulated PV drifts with any rate error; so judged, the model fits "
       "%.1f %% (estimation) and %.1f %% (held out)",
       j.horizon, static_cast<double>(j.horizon) * j.sample_period_s, j.model_fitness_percent,

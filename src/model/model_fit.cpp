@@ -1066,11 +1066,12 @@ std::vector<double> k_step_output(const ModelFit& fit, const std::vector<double>
   const std::vector<double>* load = load_series                   ? load_series
                                     : fit.disturbance.size() == N ? &fit.disturbance
                                                                   : nullptr;
-  std::vector<double> v(y);  // the measured output (differenced if integrating)
+  std::vector<double> dy;  // an integrating fit's recursion runs on the differenced output
   if (fit.integrating) {
-    for (std::size_t t = N - 1; t >= 1; --t) v[t] = y[t] - y[t - 1];
-    v[0] = 0.0;
+    dy.assign(N, 0.0);
+    for (std::size_t t = 1; t < N; ++t) dy[t] = y[t] - y[t - 1];
   }
+  const std::vector<double>& v = fit.integrating ? dy : y;
   std::vector<double> out = fit.y_sim, p(k);
   const std::size_t first = std::max(fit.first_sample, lag + 1) + k;
   for (std::size_t t = first; t < N; ++t) {
