@@ -46,6 +46,7 @@ void add_export(CLI::App& app, int& exit_code) {
   struct Args {
     std::string db, loop, from, to, out;
     std::int64_t run = 0;
+    std::size_t max_rows = kDefaultMaxRows;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("--db", a->db, "SQLite recording")->required();
@@ -55,8 +56,14 @@ void add_export(CLI::App& app, int& exit_code) {
   cmd->add_option("--run", a->run,
                   "recording run (default: the latest with this loop; stderr names the others)");
   cmd->add_option("--out", a->out, "CSV file to write")->required();
+  // The reader's bound on memory; its refusal names this option, so export must take it.
+  cmd->add_option("--max-rows", a->max_rows,
+                  "refuse a range with more rows than this (it bounds memory, about 50 bytes a "
+                  "row)")
+      ->check(CLI::Range(std::size_t{2}, std::size_t{1'000'000'000'000}))
+      ->capture_default_str();
   cmd->callback([a, &exit_code] {
-    const RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to, a->run);
+    const RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to, a->run, a->max_rows);
     // Several runs (two recorders once, or one run after another) must not be merged silently.
     std::cerr << "export: loop " << a->loop << " of run " << r.run << " (started "
               << r.run_info.started_utc << ", " << r.run_info.status

@@ -229,6 +229,19 @@ TEST_CASE("record exits 4 when errors happened, 0 when not; export and fit read 
     std::string header;
     std::getline(f, header);
     CHECK(header == "t,op,pv,sp");
+    // The reader's bound on rows, which its refusal tells the user to raise, is export's option.
+    const fs::path capped = kTmp / "capped.csv";
+    fs::remove(capped);
+    r = run(
+        {"export", "--db", db, "--loop", "FIC101", "--out", capped.string(), "--max-rows", "100"});
+    CHECK(r.status == 2);
+    CHECK(r.out.find("more than 100 rows in the range") != std::string::npos);
+    CHECK(r.out.find("--max-rows") != std::string::npos);
+    CHECK_FALSE(fs::exists(capped));
+    r = run(
+        {"export", "--db", db, "--loop", "FIC101", "--out", capped.string(), "--max-rows", "600"});
+    CHECK(r.status == 0);
+    CHECK(r.out.find("wrote " + capped.string() + ": 600 samples") != std::string::npos);
     r = run({"fit", "--db", db, "--loop", "FIC101", "--na-max", "1", "--nb-max", "1", "--nk-max",
              "6", "--L-max", "6"});
     CHECK(r.status == 0);
