@@ -1,6 +1,7 @@
 #include <iostream>
 
 #include "commands.hpp"
+#include "data_options.hpp"
 #include "valvediag/csv_writer.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/recorder.hpp"
@@ -57,11 +58,7 @@ void add_export(CLI::App& app, int& exit_code) {
                   "recording run (default: the latest with this loop; stderr names the others)");
   cmd->add_option("--out", a->out, "CSV file to write")->required();
   // The reader's bound on memory; its refusal names this option, so export must take it.
-  cmd->add_option("--max-rows", a->max_rows,
-                  "refuse a range with more rows than this (it bounds memory, about 50 bytes a "
-                  "row)")
-      ->check(CLI::Range(std::size_t{2}, std::size_t{1'000'000'000'000}))
-      ->capture_default_str();
+  add_max_rows_option(cmd, a->max_rows, "a range");
   cmd->callback([a, &exit_code] {
     const RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to, a->run, a->max_rows);
     // Several runs (two recorders once, or one run after another) must not be merged silently.

@@ -13,6 +13,16 @@
 
 namespace valvediag::cli {
 
+CLI::Option* add_max_rows_option(CLI::App* cmd, std::size_t& max_rows, const std::string& what) {
+  return cmd
+      ->add_option(
+          "--max-rows", max_rows,
+          "refuse " + what + " with more rows than this (it bounds memory, about 50 bytes a row)")
+      // An upper end, so that "-3" (read as a huge unsigned number) is refused.
+      ->check(CLI::Range(std::size_t{2}, std::size_t{1'000'000'000'000}))
+      ->capture_default_str();
+}
+
 void add_data_options(CLI::App* cmd, DataOptions& d) {
   const char* g = "Input";
   cmd->add_option("data", d.data,
@@ -76,13 +86,7 @@ void add_layout_options(CLI::App* cmd, DataOptions& d) {
           ->capture_default_str();
   cmd->add_flag("--resample", d.csv.resample, "interpolate irregular sampling onto a uniform grid")
       ->group(g);
-  cmd->add_option("--max-rows", d.csv.max_rows,
-                  "refuse data (a CSV or .mat file, a --db range) with more rows than this (it "
-                  "bounds memory, about 50 bytes a row)")
-      // An upper end, so that "-3" (read as a huge unsigned number) is refused.
-      ->check(CLI::Range(std::size_t{2}, std::size_t{1'000'000'000'000}))
-      ->group(g)
-      ->capture_default_str();
+  add_max_rows_option(cmd, d.csv.max_rows, "data (a CSV or .mat file, a --db range)")->group(g);
   cmd->add_option(
          "--sample-period", d.sample_period,
          "sample period in s (with --resample, without a time column, or for a .mat matrix or "

@@ -36,6 +36,8 @@ struct DataOptions {
   bool require_pv = true;
 };
 
+// --max-rows: the readers' bound on memory, refusing `what` with more rows.
+CLI::Option* add_max_rows_option(CLI::App* cmd, std::size_t& max_rows, const std::string& what);
 // Adds the positional DATA, --db/--loop/--from/--to and the CSV layout options (group "Input").
 void add_data_options(CLI::App* cmd, DataOptions& d);
 // Only the CSV layout options (columns, delimiter, header lines, time format, ...), for commands
