@@ -384,7 +384,8 @@ BusConfig read_bus(const Table& t, const std::string& base_dir) {
 }
 
 PointConfig read_modbus_point(const Table& t) {
-  t.allow_only({"register", "address", "type", "byte_order", "scale", "offset", "stale_after"});
+  t.allow_only(
+      {"register", "address", "type", "data_type", "byte_order", "scale", "offset", "stale_after"});
   PointConfig p;
   p.present = true;
   p.line = t.line();
@@ -395,27 +396,46 @@ PointConfig read_modbus_point(const Table& t) {
     p.reg = RegisterType::input;
   else
     t.fail("register", "'" + reg + "' must be \"holding\" or \"input\" (coils are not values)");
-  const std::string type = t.string("type", "", true);
+  // `data_type` is Telegraf's name for `type`: a point pasted from its Modbus input reads as is.
+  if (t.has("type") && t.has("data_type"))
+    t.fail("data_type", "and `type` both give the point's type: keep one");
+  const char* type_key = t.has("data_type") ? "data_type" : "type";
+  const std::string type = t.string(type_key, "", true);
   const auto dt = parse_data_type(type);
-  if (!dt) t.fail("type", "'" + type + "' must be INT16, UINT16, INT32, UINT32 or FLOAT32");
+  if (!dt)
+    t.fail(
+        type_key,
+        "'" + type + "' must be INT16, UINT16, INT32, UINT32, FLOAT32, INT64, UINT64 or FLOAT64");
   p.type = *dt;
   p.address = static_cast<int>(
       t.integer("address", 0, 0, 65536 - static_cast<std::int64_t>(register_count(p.type)), true));
   const std::string order = t.string("byte_order", "ABCD");
   const auto bo = parse_byte_order(order);
-  if (!bo) t.fail("byte_order", "'" + order + "' must be ABCD, CDAB, BADC or DCBA (or AB, BA)");
+  if (!bo)
+    t.fail("byte_order", "'" + order +
+                             "' must be ABCD, CDAB, BADC or DCBA (or AB, BA; or for 64-bit types "
+                             "ABCDEFGH, GHEFCDAB, BADCFEHG, HGFEDCBA)");
   p.order = *bo;
   // The order's length must fit the type: a 32-bit order on one register (or the reverse)
   // usually means the type is wrong, and one register of a 32-bit value is a wrong number.
+  // A 64-bit value also takes a 4-letter order (its registers in order or reversed, each one's
+  // bytes in order or swapped), as Telegraf applies one byte_order to every width.
   if (t.has("byte_order")) {
-    const bool one_register = register_count(p.type) == 1;
-    if (one_register && order.size() != 2)
-      t.fail("byte_order", "'" + order + "' orders the 4 bytes of a 32-bit value, but " + type +
-                               " is one register: write \"AB\" or \"BA\", or give the 32-bit "
-                               "type the registers hold");
-    if (!one_register && order.size() != 4)
-      t.fail("byte_order", "'" + order + "' orders the 2 bytes of one register, but " + type +
-                               " spans two: write ABCD, CDAB, BADC or DCBA");
+    const std::size_t regs = register_count(p.type);
+    const std::string want =
+        to_string(ByteOrder::abcd, p.type) + ", " + to_string(ByteOrder::cdab, p.type) + ", " +
+        to_string(ByteOrder::badc, p.type) + " or " + to_string(ByteOrder::dcba, p.type);
+    const std::string what =
+        "'" + order + "' orders the " + std::to_string(order.size()) + " bytes of " +
+        (order.size() == 2 ? std::string("one register")
+                           : "a " + std::to_string(order.size() * 8) + "-bit value") +
+        ", but " + type;
+    if (regs == 1 && order.size() != 2)
+      t.fail("byte_order", what + " is one register: write \"AB\" or \"BA\", or give the " +
+                               std::to_string(order.size() * 8) + "-bit type the registers hold");
+    if (regs == 2 && order.size() != 4) t.fail("byte_order", what + " spans two: write " + want);
+    if (regs == 4 && order.size() == 2)
+      t.fail("byte_order", what + " spans four: write " + want + " (or ABCD, CDAB, BADC, DCBA)");
   }
   p.scale = t.number("scale", 1.0);
   if (p.scale == 0.0) t.fail("scale", "must not be 0");

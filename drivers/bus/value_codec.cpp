@@ -13,14 +13,17 @@ std::optional<DataType> parse_data_type(std::string_view s) {
   if (s == "INT32") return DataType::int32;
   if (s == "UINT32") return DataType::uint32;
   if (s == "FLOAT32" || s == "FLOAT32-IEEE") return DataType::float32;
+  if (s == "INT64") return DataType::int64;
+  if (s == "UINT64") return DataType::uint64;
+  if (s == "FLOAT64" || s == "FLOAT64-IEEE") return DataType::float64;
   return std::nullopt;
 }
 
 std::optional<ByteOrder> parse_byte_order(std::string_view s) {
-  if (s == "ABCD" || s == "AB") return ByteOrder::abcd;
-  if (s == "CDAB") return ByteOrder::cdab;
-  if (s == "BADC" || s == "BA") return ByteOrder::badc;
-  if (s == "DCBA") return ByteOrder::dcba;
+  if (s == "ABCD" || s == "AB" || s == "ABCDEFGH") return ByteOrder::abcd;
+  if (s == "CDAB" || s == "GHEFCDAB") return ByteOrder::cdab;
+  if (s == "BADC" || s == "BA" || s == "BADCFEHG") return ByteOrder::badc;
+  if (s == "DCBA" || s == "HGFEDCBA") return ByteOrder::dcba;
   return std::nullopt;
 }
 
@@ -36,6 +39,12 @@ std::string to_string(DataType t) {
       return "UINT32";
     case DataType::float32:
       return "FLOAT32";
+    case DataType::int64:
+      return "INT64";
+    case DataType::uint64:
+      return "UINT64";
+    case DataType::float64:
+      return "FLOAT64";
   }
   return "?";
 }
@@ -54,55 +63,65 @@ std::string to_string(ByteOrder o) {
   return "?";
 }
 
+std::string to_string(ByteOrder o, DataType width) {
+  static const char* const k16[] = {"AB", "AB", "BA", "BA"};
+  static const char* const k64[] = {"ABCDEFGH", "GHEFCDAB", "BADCFEHG", "HGFEDCBA"};
+  const auto i = static_cast<std::size_t>(o);
+  switch (register_count(width)) {
+    case 1:
+      return k16[i];
+    case 4:
+      return k64[i];
+    default:
+      return to_string(o);
+  }
+}
+
 std::size_t register_count(DataType t) {
-  return t == DataType::int16 || t == DataType::uint16 ? 1 : 2;
+  switch (t) {
+    case DataType::int16:
+    case DataType::uint16:
+      return 1;
+    case DataType::int64:
+    case DataType::uint64:
+    case DataType::float64:
+      return 4;
+    default:
+      return 2;
+  }
 }
 
 namespace {
 
-// Wire position (0..3) of each value byte A..D for an order.
-constexpr int kWirePos[4][4] = {
-    {0, 1, 2, 3},  // ABCD
-    {2, 3, 0, 1},  // CDAB
-    {1, 0, 3, 2},  // BADC
-    {3, 2, 1, 0},  // DCBA
-};
+// Wire position (0 .. 2n - 1) of the value's byte k (0 the most significant) in n registers.
+std::size_t wire_position(std::size_t k, std::size_t n, ByteOrder order) {
+  const bool words_reversed = order == ByteOrder::cdab || order == ByteOrder::dcba;
+  const bool bytes_swapped = order == ByteOrder::badc || order == ByteOrder::dcba;
+  const std::size_t reg = words_reversed ? n - 1 - k / 2 : k / 2;
+  return 2 * reg + (bytes_swapped ? 1 - k % 2 : k % 2);
+}
 
-std::uint32_t assemble(std::span<const std::uint16_t> regs, DataType type, ByteOrder order) {
+std::uint64_t assemble(std::span<const std::uint16_t> regs, DataType type, ByteOrder order) {
   const std::size_t n = register_count(type);
   if (regs.size() < n)
     throw std::invalid_argument(to_string(type) + " needs " + std::to_string(n) +
                                 " registers, got " + std::to_string(regs.size()));
-  std::uint8_t wire[4] = {0, 0, 0, 0};
+  std::uint8_t wire[2 * kMaxRegisters] = {};
   for (std::size_t i = 0; i < n; ++i) {
     wire[2 * i] = static_cast<std::uint8_t>(regs[i] >> 8);
     wire[2 * i + 1] = static_cast<std::uint8_t>(regs[i] & 0xff);
   }
-  const int o = static_cast<int>(order);
-  if (n == 1) {
-    // 16 bits: "AB" for ABCD/CDAB, "BA" for BADC/DCBA.
-    const bool swapped = order == ByteOrder::badc || order == ByteOrder::dcba;
-    return swapped ? (std::uint32_t{wire[1]} << 8) | wire[0]
-                   : (std::uint32_t{wire[0]} << 8) | wire[1];
-  }
-  std::uint32_t v = 0;
-  for (int b = 0; b < 4; ++b) v = (v << 8) | wire[kWirePos[o][b]];
+  std::uint64_t v = 0;
+  for (std::size_t k = 0; k < 2 * n; ++k) v = (v << 8) | wire[wire_position(k, n, order)];
   return v;
 }
 
-void disassemble(std::uint32_t v, DataType type, ByteOrder order, std::span<std::uint16_t> out) {
+void disassemble(std::uint64_t v, DataType type, ByteOrder order, std::span<std::uint16_t> out) {
   const std::size_t n = register_count(type);
   if (out.size() < n) throw std::invalid_argument("encode: too few registers");
-  std::uint8_t wire[4] = {0, 0, 0, 0};
-  if (n == 1) {
-    const bool swapped = order == ByteOrder::badc || order == ByteOrder::dcba;
-    const auto hi = static_cast<std::uint8_t>(v >> 8), lo = static_cast<std::uint8_t>(v & 0xff);
-    wire[0] = swapped ? lo : hi;
-    wire[1] = swapped ? hi : lo;
-  } else {
-    const int o = static_cast<int>(order);
-    for (int b = 0; b < 4; ++b) wire[kWirePos[o][b]] = static_cast<std::uint8_t>(v >> (24 - 8 * b));
-  }
+  std::uint8_t wire[2 * kMaxRegisters] = {};
+  for (std::size_t k = 0; k < 2 * n; ++k)
+    wire[wire_position(k, n, order)] = static_cast<std::uint8_t>(v >> (8 * (2 * n - 1 - k)));
   for (std::size_t i = 0; i < n; ++i)
     out[i] = static_cast<std::uint16_t>((wire[2 * i] << 8) | wire[2 * i + 1]);
 }
@@ -110,7 +129,7 @@ void disassemble(std::uint32_t v, DataType type, ByteOrder order, std::span<std:
 }  // namespace
 
 double decode_raw(std::span<const std::uint16_t> regs, DataType type, ByteOrder order) {
-  const std::uint32_t v = assemble(regs, type, order);
+  const std::uint64_t v = assemble(regs, type, order);
   switch (type) {
     case DataType::int16:
       return static_cast<std::int16_t>(static_cast<std::uint16_t>(v));
@@ -119,9 +138,15 @@ double decode_raw(std::span<const std::uint16_t> regs, DataType type, ByteOrder 
     case DataType::int32:
       return static_cast<std::int32_t>(v);
     case DataType::uint32:
-      return v;
+      return static_cast<double>(v);
     case DataType::float32:
-      return std::bit_cast<float>(v);
+      return std::bit_cast<float>(static_cast<std::uint32_t>(v));
+    case DataType::int64:
+      return static_cast<double>(static_cast<std::int64_t>(v));
+    case DataType::uint64:
+      return static_cast<double>(v);
+    case DataType::float64:
+      return std::bit_cast<double>(v);
   }
   return 0.0;
 }
@@ -138,7 +163,7 @@ void encode_registers(double value, DataType type, ByteOrder order, double scale
     if (std::isnan(raw)) return 0.0;
     return std::round(std::min(hi, std::max(lo, raw)));
   };
-  std::uint32_t v = 0;
+  std::uint64_t v = 0;
   switch (type) {
     case DataType::int16:
       v = static_cast<std::uint16_t>(static_cast<std::int16_t>(saturate(-32768.0, 32767.0)));
@@ -155,6 +180,23 @@ void encode_registers(double value, DataType type, ByteOrder order, double scale
       break;
     case DataType::float32:
       v = std::bit_cast<std::uint32_t>(static_cast<float>(raw));
+      break;
+    case DataType::int64: {
+      // 2^63 is the first double past INT64_MAX: saturate before converting (no UB).
+      const double r = saturate(-9223372036854775808.0, 9223372036854775808.0);
+      v = static_cast<std::uint64_t>(r >= 9223372036854775808.0
+                                         ? std::numeric_limits<std::int64_t>::max()
+                                         : static_cast<std::int64_t>(r));
+      break;
+    }
+    case DataType::uint64: {
+      const double r = saturate(0.0, 18446744073709551616.0);
+      v = r >= 18446744073709551616.0 ? std::numeric_limits<std::uint64_t>::max()
+                                      : static_cast<std::uint64_t>(r);
+      break;
+    }
+    case DataType::float64:
+      v = std::bit_cast<std::uint64_t>(raw);
       break;
   }
   disassemble(v, type, order, out);

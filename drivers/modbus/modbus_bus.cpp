@@ -51,7 +51,7 @@ Clock::duration seconds(double s) {
 
 // When a point's raw registers last changed, for stale_after.
 struct RawHistory {
-  std::uint16_t regs[2] = {0, 0};
+  std::uint16_t regs[kMaxRegisters] = {};
   Clock::time_point since{};
   bool seen = false;
 };

@@ -135,7 +135,7 @@ struct SimPlc::Impl {
     if (!p.present) return;
     std::uint16_t* tab =
         p.reg == RegisterType::holding ? map->tab_registers : map->tab_input_registers;
-    std::uint16_t regs[2] = {0, 0};
+    std::uint16_t regs[kMaxRegisters] = {};
     encode_registers(v, p.type, p.order, p.scale, p.offset, regs);
     for (std::size_t i = 0; i < register_count(p.type); ++i) tab[p.address + i] = regs[i];
   }

@@ -204,6 +204,48 @@ TEST_CASE("values once taken silently are errors at their line: issue 34 item 9"
   CHECK(ok.loops[0].point(PointName::op).order == ByteOrder::badc);
   CHECK(ok.loops[0].point(PointName::pv).order == ByteOrder::abcd);
 
+  // 64-bit types as Telegraf's Modbus input writes them: `data_type`, 8-letter orders, and its
+  // 4-letter orders applied to every width.
+  const SiteConfig t64 = parse_site_config(
+      std::string(kBus) + loop +
+          "op = { address = 0, data_type = \"FLOAT64-IEEE\", byte_order = \"GHEFCDAB\" }\n" +
+          "pv = { address = 4, data_type = \"INT64\", byte_order = \"DCBA\" }\n" +
+          "sp = { address = 8, type = \"UINT64\" }\n",
+      "t.toml");
+  CHECK(t64.loops[0].point(PointName::op).type == DataType::float64);
+  CHECK(t64.loops[0].point(PointName::op).order == ByteOrder::cdab);
+  CHECK(t64.loops[0].point(PointName::pv).type == DataType::int64);
+  CHECK(t64.loops[0].point(PointName::pv).order == ByteOrder::dcba);
+  CHECK(t64.loops[0].point(PointName::sp).type == DataType::uint64);
+  e = error_of(std::string(kBus) + loop +
+               "op = { address = 0, type = \"FLOAT32\", data_type = \"FLOAT32\" }\n" +
+               "pv = { address = 2, type = \"FLOAT32\" }\n");
+  CHECK(e.line() == 9);
+  CHECK(e.key() == "loop[0].op.data_type");
+  CHECK(std::string(e.what()).find("and `type` both give the point's type: keep one") !=
+        std::string::npos);
+  e = error_of(std::string(kBus) + loop +
+               "op = { address = 0, type = \"INT64\", byte_order = \"BA\" }\n" +
+               "pv = { address = 4, type = \"FLOAT32\" }\n");
+  CHECK(e.key() == "loop[0].op.byte_order");
+  CHECK(std::string(e.what()).find("'BA' orders the 2 bytes of one register, but INT64 spans "
+                                   "four: write ABCDEFGH, GHEFCDAB, BADCFEHG or HGFEDCBA") !=
+        std::string::npos);
+  e = error_of(std::string(kBus) + loop +
+               "op = { address = 0, type = \"FLOAT32\", byte_order = \"ABCDEFGH\" }\n" +
+               "pv = { address = 2, type = \"FLOAT32\" }\n");
+  CHECK(std::string(e.what()).find("'ABCDEFGH' orders the 8 bytes of a 64-bit value, but FLOAT32 "
+                                   "spans two: write ABCD, CDAB, BADC or DCBA") !=
+        std::string::npos);
+  // Four registers must fit below 65536.
+  e = error_of(std::string(kBus) + loop + "op = { address = 65533, type = \"FLOAT64\" }\n" +
+               "pv = { address = 2, type = \"FLOAT32\" }\n");
+  CHECK(e.key() == "loop[0].op.address");
+  e = error_of(std::string(kBus) + loop + "op = { address = 0, type = \"FLOAT128\" }\n" +
+               "pv = { address = 2, type = \"FLOAT32\" }\n");
+  CHECK(std::string(e.what()).find("'FLOAT128' must be INT16, UINT16, INT32, UINT32, FLOAT32, "
+                                   "INT64, UINT64 or FLOAT64") != std::string::npos);
+
   // A NUL inside a string (TOML's \u0000 escape), in a value and in a key.
   e = error_of(std::string(kBus) + "[[loop]]\nname = \"FIC\\u0000101\"\nbus = \"p\"\n" +
                "sample_period = \"1s\"\n" + points);

@@ -75,6 +75,33 @@ TEST_CASE("values read over Modbus TCP equal the simulated ones, in every type a
   CHECK(st.connected);
 }
 
+TEST_CASE("64-bit values over Modbus TCP, as a Telegraf configuration gives them") {
+  SiteConfig site = parse_site_config(
+      "[[bus]]\nname = \"t\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:5020\"\n"
+      "[[loop]]\nname = \"FIC64\"\nbus = \"t\"\nsimulate = \"paper-ex1\"\n"
+      "sample_period = \"1s\"\n"
+      "op = { address = 0, data_type = \"FLOAT64-IEEE\", byte_order = \"GHEFCDAB\" }\n"
+      "pv = { address = 4, data_type = \"INT64\", byte_order = \"HGFEDCBA\", scale = 1e-9 }\n"
+      "sp = { address = 8, data_type = \"UINT64\", byte_order = \"BADC\", scale = 1e-6 }\n",
+      "t64.toml");
+  SimPlc plc{site, SimPlcOptions{1e-6, 0}};
+  plc.start();
+  site.buses[0].port = plc.port();
+  REQUIRE(test::wait_for([&] { return plc.steps()[0] >= 1; }, 5.0));
+  ModbusBus bus(site.buses[0], site.loops);
+  const auto truth = plc.latest();
+  const LoopValues v = bus.read(0);
+  INFO(v.error);
+  CHECK(v.error == "");
+  CHECK(plan_requests(site.loops[0]).front().count == 12);  // three values, four registers each
+  // A double is exact; 1e-9 and 1e-6 per count resolve far below the values' noise.
+  CHECK(v[PointName::op].value == truth[0].op);
+  CHECK(std::fabs(v[PointName::pv].value - truth[0].pv) <= 0.5e-9 + 1e-12);
+  CHECK(std::fabs(v[PointName::sp].value - truth[0].sp) <= 0.5e-6 + 1e-12);
+  for (auto p : {PointName::op, PointName::pv, PointName::sp}) CHECK(v[p].quality == Quality::good);
+  CHECK(plc.write_requests() == 0);
+}
+
 TEST_CASE("faults: exception, timeout, garbled reply, dropped connection, slow reply") {
   Fixture fx;
   for (auto& b : fx.site.buses) {

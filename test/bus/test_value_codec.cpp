@@ -56,14 +56,15 @@ TEST_CASE("integer types, 16-bit byte swap, scale and offset") {
 }
 
 TEST_CASE("encode then decode returns the value to the resolution of the type") {
-  const DataType types[] = {DataType::int16, DataType::uint16, DataType::int32, DataType::uint32,
-                            DataType::float32};
+  const DataType types[] = {DataType::int16,  DataType::uint16,  DataType::int32,
+                            DataType::uint32, DataType::float32, DataType::int64,
+                            DataType::uint64, DataType::float64};
   const ByteOrder orders[] = {ByteOrder::abcd, ByteOrder::cdab, ByteOrder::badc, ByteOrder::dcba};
   for (auto t : types)
     for (auto o : orders) {
       const double scale = t == DataType::float32 ? 1.0 : 0.01, offset = 2.0;
       for (double v : {2.0, 37.21, 99.99, 150.0}) {
-        std::array<std::uint16_t, 2> regs{};
+        std::array<std::uint16_t, kMaxRegisters> regs{};
         encode_registers(v, t, o, scale, offset, regs);
         const double back = decode_registers(regs, t, o, scale, offset);
         INFO(to_string(t), " ", to_string(o), " ", v);
@@ -76,8 +77,60 @@ TEST_CASE("encode then decode returns the value to the resolution of the type") 
   CHECK(decode_raw(r, DataType::int16, ByteOrder::abcd) == 32767);
 }
 
+TEST_CASE("64-bit values in the four byte orders, saturated at their range") {
+  // 0x0102030405060700 (exact in a double) and 1.0 = 0x3FF0000000000000; A = 0x01 ... H = 0x00.
+  struct Case {
+    ByteOrder order;
+    const char* name;
+    std::array<std::uint16_t, 4> count, one;
+  };
+  const Case cases[] = {
+      {ByteOrder::abcd, "ABCDEFGH", {0x0102, 0x0304, 0x0506, 0x0700}, {0x3FF0, 0, 0, 0}},
+      {ByteOrder::cdab, "GHEFCDAB", {0x0700, 0x0506, 0x0304, 0x0102}, {0, 0, 0, 0x3FF0}},
+      {ByteOrder::badc, "BADCFEHG", {0x0201, 0x0403, 0x0605, 0x0007}, {0xF03F, 0, 0, 0}},
+      {ByteOrder::dcba, "HGFEDCBA", {0x0007, 0x0605, 0x0403, 0x0201}, {0, 0, 0, 0xF03F}},
+  };
+  for (const auto& c : cases) {
+    INFO(c.name);
+    CHECK(parse_byte_order(c.name) == c.order);
+    CHECK(to_string(c.order, DataType::float64) == c.name);
+    CHECK(decode_raw(c.count, DataType::uint64, c.order) == 72623859790382848.0);
+    CHECK(decode_raw(c.count, DataType::int64, c.order) == 72623859790382848.0);
+    CHECK(decode_raw(c.one, DataType::float64, c.order) == 1.0);
+    std::array<std::uint16_t, 4> out{};
+    encode_registers(72623859790382848.0, DataType::uint64, c.order, 1.0, 0.0, out);
+    CHECK(out == c.count);
+    encode_registers(1.0, DataType::float64, c.order, 1.0, 0.0, out);
+    CHECK(out == c.one);
+    // A double keeps what a float would round: FLOAT64 carries the value, not FLOAT32's 7 digits.
+    encode_registers(-1234.56789012345, DataType::float64, c.order, 1.0, 0.0, out);
+    CHECK(decode_raw(out, DataType::float64, c.order) == -1234.56789012345);
+  }
+  const std::array<std::uint16_t, 4> m2{0xFFFF, 0xFFFF, 0xFFFF, 0xFFFE};
+  CHECK(decode_raw(m2, DataType::int64, ByteOrder::abcd) == -2.0);
+  // Out of range: the nearest end, never a wrapped or undefined conversion; NaN is 0.
+  std::array<std::uint16_t, 4> r{};
+  encode_registers(1e30, DataType::int64, ByteOrder::abcd, 1.0, 0.0, r);
+  CHECK(r == std::array<std::uint16_t, 4>{0x7FFF, 0xFFFF, 0xFFFF, 0xFFFF});
+  encode_registers(-1e30, DataType::int64, ByteOrder::abcd, 1.0, 0.0, r);
+  CHECK(r == std::array<std::uint16_t, 4>{0x8000, 0, 0, 0});
+  encode_registers(1e30, DataType::uint64, ByteOrder::abcd, 1.0, 0.0, r);
+  CHECK(r == std::array<std::uint16_t, 4>{0xFFFF, 0xFFFF, 0xFFFF, 0xFFFF});
+  encode_registers(-5.0, DataType::uint64, ByteOrder::abcd, 1.0, 0.0, r);
+  CHECK(r == std::array<std::uint16_t, 4>{0, 0, 0, 0});
+  encode_registers(std::nan(""), DataType::int64, ByteOrder::abcd, 1.0, 0.0, r);
+  CHECK(r == std::array<std::uint16_t, 4>{0, 0, 0, 0});
+  const std::array<std::uint16_t, 2> two{1, 2};
+  CHECK_THROWS_AS(decode_raw(two, DataType::float64, ByteOrder::abcd), std::invalid_argument);
+  CHECK(register_count(DataType::int64) == 4);
+  CHECK(register_count(DataType::float64) == 4);
+}
+
 TEST_CASE("names of types and byte orders") {
   CHECK(parse_data_type("FLOAT32") == DataType::float32);
+  CHECK(parse_data_type("FLOAT64-IEEE") == DataType::float64);  // Telegraf's name
+  CHECK(parse_data_type("INT64") == DataType::int64);
+  CHECK(parse_data_type("UINT64") == DataType::uint64);
   CHECK(!parse_data_type("float"));
   CHECK(parse_byte_order("BA") == ByteOrder::badc);
   CHECK(!parse_byte_order("ACBD"));
