@@ -1,6 +1,7 @@
 #include "valvediag/autocorrelation.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <complex>
 #include <numeric>
 #include <unsupported/Eigen/FFT>
@@ -44,6 +45,50 @@ double effective_sample_size(const std::vector<double>& y, const std::vector<dou
   e.reserve(t1 > t0 ? t1 - t0 : 0);
   for (std::size_t t = t0; t < t1; ++t) e.push_back(y[t] - y_sim[t]);
   return effective_sample_size(e);
+}
+
+ResidualCorrelation residual_correlation(const std::vector<double>& e, const std::vector<double>& u,
+                                         std::size_t max_lag) {
+  ResidualCorrelation r;
+  const std::size_t N = std::min(e.size(), u.size());
+  r.samples = N;
+  r.max_lag = max_lag;
+  if (N < 2 * max_lag + 2) return r;
+  const std::vector<double> ae = autocorrelation(std::vector<double>(e.begin(), e.begin() + N));
+  const std::vector<double> au = autocorrelation(std::vector<double>(u.begin(), u.begin() + N));
+  if (ae.empty()) return r;  // a constant residual: nothing to test
+  const double n = static_cast<double>(N);
+  constexpr double z99 = 2.5758;  // the standard normal's two-sided 99 % quantile
+  r.autocorrelation.assign(ae.begin(), ae.begin() + static_cast<std::ptrdiff_t>(max_lag) + 1);
+  r.autocorrelation_band = z99 / std::sqrt(n);
+  if (au.empty()) return r;  // a constant input: no cross-correlation
+  const auto mean = [N](const std::vector<double>& x) {
+    double m = 0.0;
+    for (std::size_t t = 0; t < N; ++t) m += x[t];
+    return m / static_cast<double>(N);
+  };
+  const double me = mean(e), mu = mean(u);
+  double se = 0.0, su = 0.0;
+  for (std::size_t t = 0; t < N; ++t) {
+    se += (e[t] - me) * (e[t] - me);
+    su += (u[t] - mu) * (u[t] - mu);
+  }
+  const double norm = std::sqrt(se * su);
+  const auto M = static_cast<std::ptrdiff_t>(max_lag);
+  r.cross_correlation.resize(2 * max_lag + 1);
+  for (std::ptrdiff_t k = -M; k <= M; ++k) {
+    double c = 0.0;
+    const std::ptrdiff_t from = std::max<std::ptrdiff_t>(0, k);
+    const std::ptrdiff_t to = std::min<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(N),
+                                                       static_cast<std::ptrdiff_t>(N) + k);
+    for (std::ptrdiff_t t = from; t < to; ++t)
+      c += (e[static_cast<std::size_t>(t)] - me) * (u[static_cast<std::size_t>(t - k)] - mu);
+    r.cross_correlation[static_cast<std::size_t>(k + M)] = c / norm;
+  }
+  double p = 1.0;
+  for (std::size_t k = 1; k <= max_lag; ++k) p += 2.0 * ae[k] * au[k];
+  r.cross_correlation_band = z99 * std::sqrt(std::max(p, 1.0 / n) / n);
+  return r;
 }
 
 }  // namespace valvediag

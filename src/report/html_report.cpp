@@ -13,6 +13,7 @@
 #include <stdexcept>
 
 #include "number_format.hpp"
+#include "valvediag/autocorrelation.hpp"
 #include "valvediag/fit_report.hpp"
 #include "valvediag/text_stats.hpp"
 
@@ -451,6 +452,77 @@ PlotJob residual_plot(const ReportContent& c, std::size_t buckets) {
     cap += " RMS " + num(c.where->rms, 3) + ", white-noise level " + num(c.where->noise_level, 3) +
            ".";
   return {"plot-residual", "Residual: measured minus simulated PV", cap, p.script(), ""};
+}
+
+// MATLAB's `resid` on the estimation part: the residual's autocorrelation and its
+// cross-correlation with OP, over lags as long as the linear block takes to settle (25 to 250).
+PlotJob resid_plot(const ReportContent& c) {
+  const LoopData& d = *c.data;
+  const ModelFit& f = *c.fit;
+  const double Ts = d.sample_period();
+  const std::size_t from = f.first_sample, to = std::min(f.estimation_end, d.size());
+  PlotJob job{"plot-resid", "Residual tests: autocorrelation, and correlation with OP", "", "", ""};
+  if (to <= from + 8) {
+    job.missing = "Too few estimation samples for the residual tests.";
+    return job;
+  }
+  std::vector<double> e, u;
+  for (std::size_t k = from; k < to; ++k) {
+    e.push_back(d.pv[k] - f.y_sim[k]);
+    u.push_back(d.op[k]);
+  }
+  const std::size_t settle = settling_samples(f.a, f.b, f.structure.nk, f.integrating,
+                                              std::max<std::size_t>(e.size(), 25));
+  const std::size_t lags = std::min(std::clamp<std::size_t>(settle, 25, 250), (e.size() - 2) / 2);
+  const ResidualCorrelation r = residual_correlation(e, u, lags);
+  if (r.autocorrelation.empty()) {
+    job.missing = "The residual is constant: nothing to test.";
+    return job;
+  }
+  Plot p(960, 300);
+  std::vector<std::string> ra, rc;
+  for (std::size_t k = 0; k < r.autocorrelation.size(); ++k)
+    ra.push_back(dnum(static_cast<double>(k) * Ts) + " " + dnum(r.autocorrelation[k]));
+  const auto M = static_cast<double>(r.max_lag);
+  for (std::size_t i = 0; i < r.cross_correlation.size(); ++i)
+    rc.push_back(dnum((static_cast<double>(i) - M) * Ts) + " " + dnum(r.cross_correlation[i]));
+  const std::string ba = p.block(ra), bc = rc.empty() ? "" : p.block(rc);
+  auto& o = p.out();
+  const auto band = [&o](double b) {
+    o << ", " << dnum(b) << " with lines dt 2 lc rgb '#d62728' title '99 % band', " << dnum(-b)
+      << " with lines dt 2 lc rgb '#d62728' notitle";
+  };
+  o << "set multiplot layout 1,2\nset lmargin 9\nset rmargin 2\nset yrange [-1:1]\n"
+       "set xlabel 'lag (s)'\nset ylabel 'autocorrelation'\n";
+  o << "plot " << ba << " with impulses lw 1.5 lc rgb '#1f5fa8' title 'residual'";
+  band(r.autocorrelation_band);
+  o << "\nset ylabel 'correlation'\nset xlabel 'lag (s): OP before the residual > 0'\n";
+  if (bc.empty()) {
+    o << "plot 0 with lines lc rgb '#999999' title 'OP is constant'\n";
+  } else {
+    o << "plot " << bc << " with impulses lw 1.5 lc rgb '#1f5fa8' title 'residual with OP'";
+    band(r.cross_correlation_band);
+    o << "\n";
+  }
+  o << "unset multiplot\n";
+  int auto_out = 0, cross_out = 0;
+  for (std::size_t k = 1; k < r.autocorrelation.size(); ++k)
+    auto_out += std::abs(r.autocorrelation[k]) > r.autocorrelation_band;
+  for (std::size_t i = r.max_lag + 1; i < r.cross_correlation.size(); ++i)
+    cross_out += std::abs(r.cross_correlation[i]) > r.cross_correlation_band;
+  job.caption =
+      "As MATLAB's resid, on the estimation part (" + std::to_string(r.samples) +
+      " samples), lags up to " + num(M * Ts, M * Ts >= 10 ? 0 : 1) +
+      " s. A model that leaves only noise keeps both inside the 99 % bands. Left: " +
+      std::to_string(auto_out) + " of " + std::to_string(r.max_lag) +
+      " lags outside: error that lasts (a missing effect, a slow load, too few poles). Right: " +
+      (rc.empty() ? std::string("no test, OP does not move.")
+                  : std::to_string(cross_out) + " of " + std::to_string(r.max_lag) +
+                        " positive lags outside: OP that still moves PV in a way the model does "
+                        "not carry (a valve effect, the delay, the order). In closed loop the "
+                        "negative lags show the controller answering the residual: expected.");
+  job.script = p.script();
+  return job;
 }
 
 PlotJob signature_plot(const ReportContent& c) {
@@ -1032,6 +1104,7 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
   std::vector<PlotJob> jobs{trends_plot(d, opt.buckets),
                             fit_plot(content, opt.buckets),
                             residual_plot(content, opt.buckets),
+                            resid_plot(content),
                             signature_plot(content),
                             preisach_plot(content),
                             bode_plot(content),
@@ -1048,18 +1121,19 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
   fig(o, 0);
   fig(o, 1);
   fig(o, 2);
-  o << "</section>\n<section id=\"plots-valve\">\n<h2>The valve</h2>\n<div class=\"pair\">\n";
   fig(o, 3);
+  o << "</section>\n<section id=\"plots-valve\">\n<h2>The valve</h2>\n<div class=\"pair\">\n";
   fig(o, 4);
+  fig(o, 5);
   o << "</div>\n</section>\n<section id=\"plots-process\">\n<h2>The process (linear "
        "block)</h2>\n";
-  fig(o, 5);
   fig(o, 6);
+  fig(o, 7);
   o << "</section>\n";
   where_section(o, content);
   diagnosis_section(o, content);
   o << "<section id=\"plots-ladder\">\n<h2>Model ladder: the error as effects are added</h2>\n";
-  fig(o, 7);
+  fig(o, 8);
   o << "</section>\n";
   ladder_section(o, content);
   page_foot(o, content.generator, content.generated, drawn);

@@ -202,8 +202,8 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
   const std::string& h = r.html;
   check_self_contained(h);
   CHECK(r.warnings.empty());
-  CHECK(r.plots.size() == 8);
-  for (const char* id : {"plot-trends", "plot-fit", "plot-residual", "plot-signature",
+  CHECK(r.plots.size() == 9);
+  for (const char* id : {"plot-trends", "plot-fit", "plot-residual", "plot-resid", "plot-signature",
                          "plot-preisach", "plot-bode", "plot-step", "plot-ladder"})
     CHECK_MESSAGE(has_plot(h, id), id);
   // Failing intervals shaded (gnuplot draws the rectangles as filled polygons in #f4b6b6).
@@ -214,6 +214,11 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
   CHECK(figure(h, "plot-bode").find("phase (deg)") != std::string::npos);
   CHECK(figure(h, "plot-bode").find("|G| (dB)") != std::string::npos);
   CHECK(figure(h, "plot-step").find("unit step") != std::string::npos);
+  // The residual tests: both panels with their 99 % bands, and what each lag outside means.
+  const std::string resid = figure(h, "plot-resid");
+  CHECK(count(resid, "99 % band") >= 2);
+  CHECK(resid.find("on the estimation part (") != std::string::npos);
+  CHECK(resid.find("positive lags outside") != std::string::npos);
   CHECK(figure(h, "plot-ladder").find("validation") != std::string::npos);
   CHECK(h.find("id=\"where-intervals\"") != std::string::npos);
   CHECK(h.find("id=\"ladder-table\"") != std::string::npos);
@@ -272,7 +277,7 @@ TEST_CASE("a model without a Preisach valve: a note in place of the triangle") {
   CHECK(figure(r.html, "plot-preisach").find("--model preisach") != std::string::npos);
   CHECK(has_plot(r.html, "plot-signature"));
   CHECK(has_plot(r.html, "plot-bode"));
-  CHECK(r.plots.size() == 7);
+  CHECK(r.plots.size() == 8);
 }
 
 TEST_CASE("gnuplot missing: an error, or the page with notes in place of the plots") {
@@ -285,7 +290,7 @@ TEST_CASE("gnuplot missing: an error, or the page with notes in place of the plo
   check_self_contained(r.html);
   CHECK(r.plots.empty());
   CHECK(r.html.find("<svg") == std::string::npos);
-  CHECK(count(r.html, "gnuplot-nox") >= 7);  // each plot but the triangle (no Preisach valve)
+  CHECK(count(r.html, "gnuplot-nox") >= 8);  // each plot but the triangle (no Preisach valve)
   CHECK(!r.warnings.empty());
   ReportOptions none;
   none.plots = false;
@@ -298,7 +303,7 @@ TEST_CASE("a long record stays small: plots are decimated") {
   Fixture fx("linear-clean", "linear", 25000);
   const HtmlReport r = html_report(fx.content());
   check_self_contained(r.html);
-  CHECK(r.plots.size() == 7);  // no Preisach valve in `linear`
+  CHECK(r.plots.size() == 8);  // no Preisach valve in `linear`
   MESSAGE("HTML size for 25000 samples: " << r.html.size() / 1024 << " KB, gnuplot "
                                           << r.plot_seconds << " s");
   CHECK(r.html.size() < 800 * 1024);
