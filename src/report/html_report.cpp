@@ -525,57 +525,114 @@ PlotJob resid_plot(const ReportContent& c) {
   return job;
 }
 
+// The samples a path x -> y keeps: consecutive points closer than 0.2 % of both ranges are
+// dropped; a very long noisy record keeps every m-th of the rest.
+std::vector<std::size_t> path_points(const std::vector<double>& x, const std::vector<double>& y) {
+  const auto [xmin, xmax] = std::minmax_element(x.begin(), x.end());
+  const auto [ymin, ymax] = std::minmax_element(y.begin(), y.end());
+  const double dx = 0.002 * (*xmax - *xmin), dy = 0.002 * (*ymax - *ymin);
+  std::vector<std::size_t> keep;
+  double lx = std::nan(""), ly = std::nan("");
+  for (std::size_t k = 0; k < x.size(); ++k)
+    if (!(std::abs(x[k] - lx) <= dx && std::abs(y[k] - ly) <= dy) || k + 1 == x.size()) {
+      keep.push_back(k);
+      lx = x[k];
+      ly = y[k];
+    }
+  if (keep.size() > 6000) {
+    std::vector<std::size_t> kept;
+    const std::size_t m = keep.size() / 3000 + 1;
+    for (std::size_t i = 0; i < keep.size(); i += m) kept.push_back(keep[i]);
+    keep.swap(kept);
+  }
+  return keep;
+}
+
+// A path x -> y as two blocks: the segments where x rises and those where it falls, so a
+// hysteresis loop shows which way it is travelled. The direction turns only once x has come back
+// 1 % of its range from its last extreme: noise on x does not flicker the colours.
+std::pair<std::string, std::string> directional_path(Plot& p, const std::vector<double>& x,
+                                                     const std::vector<double>& y) {
+  const std::vector<std::size_t> k = path_points(x, y);
+  const auto [xmin, xmax] = std::minmax_element(x.begin(), x.end());
+  const double turn = 0.01 * (*xmax - *xmin);
+  std::vector<std::string> rows[2];
+  std::size_t end[2] = {k.size(), k.size()};  // where each block's last segment ended
+  int dir = 0;                                // 0 rising, 1 falling
+  double extreme = k.empty() ? 0.0 : x[k[0]];
+  for (std::size_t i = 0; i + 1 < k.size(); ++i) {
+    const double next = x[k[i + 1]];
+    if (dir == 0 ? next > extreme : next < extreme) extreme = next;
+    if (dir == 0 ? next < extreme - turn : next > extreme + turn) {
+      dir = 1 - dir;
+      extreme = next;
+    }
+    auto& r = rows[dir];
+    if (end[dir] != i) {
+      if (!r.empty()) r.emplace_back("");  // a break in the line
+      r.push_back(dnum(x[k[i]]) + " " + dnum(y[k[i]]));
+    }
+    r.push_back(dnum(next) + " " + dnum(y[k[i + 1]]));
+    end[dir] = i + 1;
+  }
+  return {p.block(rows[0]), p.block(rows[1])};
+}
+
+constexpr const char* kRising = "#1f5fa8";
+constexpr const char* kFalling = "#e07b00";
+
 PlotJob signature_plot(const ReportContent& c) {
   const LoopData& d = *c.data;
   const ModelFit& f = *c.fit;
   Plot p(470, 420);
-  // A path OP -> y: consecutive points closer than 0.2 % of both ranges are dropped.
-  auto path = [&](const std::vector<double>& y) {
-    const auto [umin, umax] = std::minmax_element(d.op.begin(), d.op.end());
-    const auto [ymin, ymax] = std::minmax_element(y.begin(), y.end());
-    const double du = 0.002 * (*umax - *umin), dy = 0.002 * (*ymax - *ymin);
-    std::vector<std::string> rows;
-    double lu = std::nan(""), ly = std::nan("");
-    for (std::size_t k = 0; k < d.size(); ++k) {
-      const double u = d.op[k], x = y[k];
-      if (!(std::abs(u - lu) <= du && std::abs(x - ly) <= dy) || k + 1 == d.size()) {
-        rows.push_back(dnum(u) + " " + dnum(x));
-        lu = u;
-        ly = x;
-      }
-    }
-    if (rows.size() > 6000) {  // a very long noisy record: every m-th point
-      std::vector<std::string> kept;
-      const std::size_t m = rows.size() / 3000 + 1;
-      for (std::size_t i = 0; i < rows.size(); i += m) kept.push_back(rows[i]);
-      rows.swap(kept);
-    }
-    return p.block(rows);
-  };
-  const std::string b = path(f.x_hat);
+  const auto [up, down] = directional_path(p, d.op, f.x_hat);
   const bool pre = f.preisach.has_value();
   const bool mv = d.has_mv();
-  const std::string m = mv ? path(d.mv) : "";
+  std::string m;
+  if (mv) {
+    std::vector<std::string> rows;
+    for (std::size_t k : path_points(d.op, d.mv))
+      rows.push_back(dnum(d.op[k]) + " " + dnum(d.mv[k]));
+    m = p.block(rows);
+  }
   p.out() << "set xlabel 'OP (%)'\nset ylabel '"
           << (pre ? "estimated valve position (model units)" : "valve position (%)") << "'\n";
   // The Preisach output is in model units: the measured position then gets its own axis.
   if (mv && pre) p.out() << "set y2label 'measured valve position (%)'\nset y2tics\n";
   p.out() << "plot ";
   if (mv)
-    p.out() << m << " with lines lw 1 lc rgb '#999999' title 'OP -> measured position (MV)'"
+    p.out() << m << " with lines lw 1 lc rgb '#999999' title 'measured position (MV)'"
             << (pre ? " axes x1y2" : "") << ", ";
-  p.out() << b << " with lines lw 1 lc rgb '#1f5fa8' title 'OP -> estimated position'\n";
+  // In % of OP a valve that follows OP lies on y = x; the Preisach position has no such line.
+  if (!pre) p.out() << "x with lines dt 3 lc rgb '#666666' title 'y = x', ";
+  p.out() << up << " with lines lw 1 lc rgb '" << kRising << "' title 'OP rising', " << down
+          << " with lines lw 1 lc rgb '" << kFalling << "' title 'OP falling'\n";
   std::string cap =
       pre ? "The identified Preisach valve driven by the recorded OP (x = gamma(u)' mu, "
             "||b|| = 1: the scale is carried by the linear block). Flat stretches are "
             "where the valve sticks."
           : "The identified valve effects driven by the recorded OP. Flat stretches are "
-            "where the valve sticks.";
+            "where the valve sticks; a valve that follows OP lies on the dotted y = x.";
+  cap += " Blue while OP rises, orange while it falls: a sticky valve lags OP both ways.";
   if (mv)
     cap +=
         " Grey: the recorded valve position, from which the valve-travel test reads the "
         "friction directly.";
   return {"plot-signature", "Valve signature: OP vs valve position", cap, p.script(), ""};
+}
+
+// PV against OP, no model needed: the loop's own signature.
+PlotJob pv_op_plot(const LoopData& d) {
+  Plot p(470, 420);
+  const auto [up, down] = directional_path(p, d.op, d.pv);
+  p.out() << "set xlabel 'OP (%)'\nset ylabel 'PV'\n";
+  p.out() << "plot " << up << " with lines lw 1 lc rgb '" << kRising << "' title 'OP rising', "
+          << down << " with lines lw 1 lc rgb '" << kFalling << "' title 'OP falling'\n";
+  return {"plot-pv-op", "PV against OP",
+          "The measurements alone, blue while OP rises and orange while it falls. A sticky valve "
+          "draws cycles: OP moves on while PV holds, then PV jumps; a clean valve in a slow loop "
+          "draws a band around one line.",
+          p.script(), ""};
 }
 
 PlotJob preisach_plot(const ReportContent& c) {
@@ -1109,7 +1166,8 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
                             preisach_plot(content),
                             bode_plot(content),
                             step_plot(content),
-                            ladder_plot(content)};
+                            ladder_plot(content),
+                            pv_op_plot(d)};
   HtmlReport rep;
   const DrawnPlots drawn = draw(jobs, opt, rep);
   auto fig = [&](std::ostringstream& o, std::size_t i) { figure(o, jobs[i], drawn, i, rep); };
@@ -1125,6 +1183,8 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
   o << "</section>\n<section id=\"plots-valve\">\n<h2>The valve</h2>\n<div class=\"pair\">\n";
   fig(o, 4);
   fig(o, 5);
+  o << "</div>\n<div class=\"pair\">\n";
+  fig(o, 9);
   o << "</div>\n</section>\n<section id=\"plots-process\">\n<h2>The process (linear "
        "block)</h2>\n";
   fig(o, 6);

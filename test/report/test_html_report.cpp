@@ -202,9 +202,10 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
   const std::string& h = r.html;
   check_self_contained(h);
   CHECK(r.warnings.empty());
-  CHECK(r.plots.size() == 9);
-  for (const char* id : {"plot-trends", "plot-fit", "plot-residual", "plot-resid", "plot-signature",
-                         "plot-preisach", "plot-bode", "plot-step", "plot-ladder"})
+  CHECK(r.plots.size() == 10);
+  for (const char* id :
+       {"plot-trends", "plot-fit", "plot-residual", "plot-resid", "plot-pv-op", "plot-signature",
+        "plot-preisach", "plot-bode", "plot-step", "plot-ladder"})
     CHECK_MESSAGE(has_plot(h, id), id);
   // Failing intervals shaded (gnuplot draws the rectangles as filled polygons in #f4b6b6).
   CHECK(count(figure(h, "plot-fit"), "rgb(244, 182, 182)") >= fx.where.intervals.size());
@@ -277,7 +278,13 @@ TEST_CASE("a model without a Preisach valve: a note in place of the triangle") {
   CHECK(figure(r.html, "plot-preisach").find("--model preisach") != std::string::npos);
   CHECK(has_plot(r.html, "plot-signature"));
   CHECK(has_plot(r.html, "plot-bode"));
-  CHECK(r.plots.size() == 8);
+  CHECK(r.plots.size() == 9);
+  // In % of OP: the y = x of a valve that follows OP, and the direction of travel in two colours.
+  const std::string sig = figure(r.html, "plot-signature");
+  CHECK(sig.find("y = x") != std::string::npos);
+  CHECK(sig.find("OP rising") != std::string::npos);
+  CHECK(sig.find("OP falling") != std::string::npos);
+  CHECK(figure(r.html, "plot-pv-op").find("OP falling") != std::string::npos);
 }
 
 TEST_CASE("gnuplot missing: an error, or the page with notes in place of the plots") {
@@ -290,7 +297,7 @@ TEST_CASE("gnuplot missing: an error, or the page with notes in place of the plo
   check_self_contained(r.html);
   CHECK(r.plots.empty());
   CHECK(r.html.find("<svg") == std::string::npos);
-  CHECK(count(r.html, "gnuplot-nox") >= 8);  // each plot but the triangle (no Preisach valve)
+  CHECK(count(r.html, "gnuplot-nox") >= 9);  // each plot but the triangle (no Preisach valve)
   CHECK(!r.warnings.empty());
   ReportOptions none;
   none.plots = false;
@@ -303,7 +310,7 @@ TEST_CASE("a long record stays small: plots are decimated") {
   Fixture fx("linear-clean", "linear", 25000);
   const HtmlReport r = html_report(fx.content());
   check_self_contained(r.html);
-  CHECK(r.plots.size() == 8);  // no Preisach valve in `linear`
+  CHECK(r.plots.size() == 9);  // no Preisach valve in `linear`
   MESSAGE("HTML size for 25000 samples: " << r.html.size() / 1024 << " KB, gnuplot "
                                           << r.plot_seconds << " s");
   CHECK(r.html.size() < 800 * 1024);

@@ -67,12 +67,13 @@ TEST_CASE("report on a simulated sticky loop: one self-contained page with every
   INFO(r.out);
   REQUIRE(r.status == 0);
   CHECK(r.out.find("wrote " + out) != std::string::npos);
-  CHECK(r.out.find("9 plots") != std::string::npos);
+  CHECK(r.out.find("10 plots") != std::string::npos);
   CHECK(r.out.find("verdict:") != std::string::npos);
   const std::string h = slurp(out);
   check_self_contained(h);
-  for (const char* id : {"plot-trends", "plot-fit", "plot-residual", "plot-resid", "plot-signature",
-                         "plot-preisach", "plot-bode", "plot-step", "plot-ladder"})
+  for (const char* id :
+       {"plot-trends", "plot-fit", "plot-residual", "plot-resid", "plot-pv-op", "plot-signature",
+        "plot-preisach", "plot-bode", "plot-step", "plot-ladder"})
     CHECK_MESSAGE(has_plot(h, id), id);
   CHECK(count(figure(h, "plot-fit"), "rgb(244, 182, 182)") >= 1);  // failing intervals shaded
   CHECK(figure(h, "plot-trends").find("SP") != std::string::npos);
