@@ -41,7 +41,8 @@ struct CsvGiven {
 struct CsvOptions {
   // "plain": the layout below as it is. "auto": the fields not marked in `given` are sniffed
   // from the file's first lines: delimiter, lines before the header and between header and data,
-  // the time column and its date-time format, decimal comma, historian tags (*.MV/.OP/.OUT: op,
+  // the time column (or a date and a time-of-day column) and its date-time format, decimal comma,
+  // historian tags (*.MV/.OP/.OUT: op,
   // *.PV: pv, *.SV/.SP: sp). A choice it cannot make (two *.PV columns, day/month order) is a
   // DataError naming the option that makes it.
   std::string format = "plain";
@@ -59,7 +60,9 @@ struct CsvOptions {
   // Column specs: a header name (exact, else unique case-insensitive match, `*` and `?` allowed
   // as wildcards), or a 1-based column number when all digits. sp and mv: empty means "use the
   // column named sp / mv if there is one"; "none" never reads it. t_column "none": there is no
-  // time column and rows are `sample_period` seconds apart, starting at t = 0.
+  // time column and rows are `sample_period` seconds apart, starting at t = 0. t_column "A+B"
+  // (when no column is named so): a stamp split over a date column A and a time-of-day column B,
+  // read as A's cell, a space, B's cell; time_format covers both ("%d.%m.%Y %H:%M:%S").
   std::string t_column = "t";
   std::string op_column = "op";
   std::string pv_column = "pv";

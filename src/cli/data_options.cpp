@@ -49,10 +49,13 @@ void add_layout_options(CLI::App* cmd, DataOptions& d) {
       ->check(CLI::IsMember({"auto", "plain"}))
       ->group(g)
       ->capture_default_str();
-  d.given.t = cmd->add_option("--t", d.csv.t_column,
-                              "time column name or 1-based index ('none': no time column)")
-                  ->group(g)
-                  ->capture_default_str();
+  d.given.t =
+      cmd->add_option(
+             "--t", d.csv.t_column,
+             "time column name or 1-based index; DATE+TIME for a stamp split over a date and "
+             "a time-of-day column ('none': no time column)")
+          ->group(g)
+          ->capture_default_str();
   d.given.op =
       cmd->add_option("--op", d.csv.op_column,
                       "controller output column (.mat: field of the loop struct, or 1-based column "

@@ -717,26 +717,77 @@ CsvOptions sniff_layout(std::string_view head, bool whole, const CsvOptions& opt
   tag(g.pv, o.pv_column, "pv", "--pv", {".PV"}, "");
   tag(g.sp, o.sp_column, "sp", "--sp", {".SV", ".SP"}, " (or --sp none)");
 
-  // The time column: t or time by name, else the first column of date-time stamps.
+  // A date column beside a time-of-day column: one stamp in two cells, read joined by a space.
+  auto joined_cells = [&](std::size_t a, std::size_t b) {
+    std::vector<std::string> out;
+    for (const auto& r : rows)
+      if (a < r.size() && b < r.size() && !r[a].empty() && !r[b].empty())
+        out.push_back(r[a] + " " + r[b]);
+    return out;
+  };
+  auto stamps_of = [&](std::size_t c) { return !matching_time_formats(column_cells(c)).empty(); };
+  auto split_stamps_at = [&](std::size_t c) {
+    return c + 1 < names.size() && !stamps_of(c) &&
+           !matching_time_formats(joined_cells(c, c + 1)).empty();
+  };
+  // --t for columns c and c + 1: by name when both names are plain, else by number.
+  auto pair_spec = [&](std::size_t c) {
+    const auto plain = [&](const std::string& n) {
+      return !n.empty() && n.find_first_of("+*?") == std::string::npos &&
+             std::count_if(names.begin(), names.end(),
+                           [&](const std::string& m) { return iequal(m, n); }) == 1;
+    };
+    return plain(names[c]) && plain(names[c + 1])
+               ? names[c] + "+" + names[c + 1]
+               : std::to_string(c + 1) + "+" + std::to_string(c + 2);
+  };
+
+  // The time column: t or time by name (a `time` of day after a date column: the two), else the
+  // first column of date-time stamps, else the first date and time-of-day pair.
   std::size_t t_index = kNone;
+  bool t_split = false;
   if (!g.t && !has_name(names, "t")) {
-    if (has_name(names, "time")) {
+    std::size_t named = kNone;
+    for (std::size_t c = 0; c < names.size(); ++c)
+      if (iequal(names[c], "time")) named = c;
+    if (named != kNone && named > 0 && split_stamps_at(named - 1)) {
+      t_index = named - 1;
+      t_split = true;
+    } else if (named != kNone) {
       o.t_column = "time";
     } else {
       for (std::size_t c = 0; c < names.size() && t_index == kNone; ++c)
-        if (!matching_time_formats(column_cells(c)).empty()) t_index = c;
-      if (t_index != kNone) o.t_column = std::to_string(t_index + 1);
+        if (stamps_of(c)) t_index = c;
+      for (std::size_t c = 0; c + 1 < names.size() && t_index == kNone; ++c)
+        if (split_stamps_at(c)) {
+          t_index = c;
+          t_split = true;
+        }
     }
+    if (t_index != kNone) o.t_column = t_split ? pair_spec(t_index) : std::to_string(t_index + 1);
   }
   if (!g.time_format && o.t_column != "none") {
+    std::size_t t_second = t_split ? t_index + 1 : kNone;
     if (t_index == kNone) {
       std::vector<std::string_view> views(names.begin(), names.end());
       Column ct("t", "--t", o.t_column, false);
       resolve(ct, views, file, used[header] + 1, false);
       t_index = ct.index;
+      const std::size_t plus = o.t_column.find('+');
+      if (t_index == kNone && plus != std::string::npos) {  // the user's DATE+TIME
+        Column date("t", "--t", o.t_column.substr(0, plus), false);
+        Column time("t", "--t", o.t_column.substr(plus + 1), false);
+        resolve(date, views, file, used[header] + 1, false);
+        resolve(time, views, file, used[header] + 1, false);
+        if (date.index != kNone && time.index != kNone) {
+          t_index = date.index;
+          t_second = time.index;
+        }
+      }
     }
-    const std::vector<std::string> stamps =
-        t_index == kNone ? std::vector<std::string>{} : column_cells(t_index);
+    const std::vector<std::string> stamps = t_index == kNone    ? std::vector<std::string>{}
+                                            : t_second != kNone ? joined_cells(t_index, t_second)
+                                                                : column_cells(t_index);
     if (!stamps.empty() && !std::all_of(stamps.begin(), stamps.end(),
                                         [](const std::string& c) { return is_number(c); })) {
       const std::vector<std::string_view> fmts = matching_time_formats(stamps);
@@ -880,6 +931,23 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
   Column& cpv = cols[2];
   Column& csp = cols[3];
   Column& cmv = cols[4];
+  // A time stamp split over two columns, date and time: --t DATE+TIME (unless one column has
+  // that very name). The two cells are read as one stamp, joined by a space.
+  Column ct_time("t", "--t", "", true);
+  if (!no_time && opt.t_column.find('+') != std::string::npos) {
+    Column whole("t", "--t", opt.t_column, false);
+    resolve(whole, names, file, header_line, header_numeric);
+    const std::size_t plus = opt.t_column.find('+');
+    if (whole.index == kNone && opt.t_column.find('+', plus + 1) == std::string::npos) {
+      ct.spec = opt.t_column.substr(0, plus);
+      ct_time.spec = opt.t_column.substr(plus + 1);
+      if (ct.spec.empty() || ct_time.spec.empty())
+        throw DataError(file, 0, "",
+                        "--t " + show(opt.t_column) +
+                            ": a split time stamp is DATE+TIME, two column names or numbers");
+      resolve(ct_time, names, file, header_line, header_numeric);
+    }
+  }
   for (Column& c : cols) {
     if (c.spec == "none" && c.role != std::string_view("t")) {
       if (c.required) throw DataError(file, 0, "", std::string(c.flag) + " cannot be 'none'");
@@ -900,6 +968,15 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
                         std::string("chosen for both ") + cols[a].role + " and " + cols[b].role +
                             " (give " + cols[b].flag + " another column)");
   }
+  if (ct_time.index != kNone) {
+    for (const Column& c : cols)
+      if (c.index == ct_time.index)
+        throw DataError(file, header_line, ct_time.name,
+                        std::string("chosen for both the time of day (--t DATE+TIME) and ") +
+                            (&c == &ct ? "the date" : c.role) + " (give another column)");
+    need = std::max(need, ct_time.index + 1);
+    ct.name += "+" + ct_time.name;  // messages name the stamp as the user gave it
+  }
 
   for (std::size_t i = 0; i < opt.skip_after_header; ++i) {
     if (!lines.next(line))
@@ -915,6 +992,7 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
   std::string numbuf;
   std::string prev_time;
   std::string first_time;
+  std::string stamp;  // a split stamp's date and time, joined
   std::size_t prev_line = 0;
   detail::TimeStamp t0;
   std::string why;
@@ -984,10 +1062,10 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
                           : "text after a closing quote (fix the row or remove it)");
     if (cells.size() < need) {
       const Column* missing = nullptr;
-      for (const Column& c : cols)
-        if (c.index != kNone && c.index >= cells.size() &&
-            (missing == nullptr || c.index < missing->index))
-          missing = &c;
+      for (const Column* c : {&cols[0], &cols[1], &cols[2], &cols[3], &cols[4], &ct_time})
+        if (c->index != kNone && c->index >= cells.size() &&
+            (missing == nullptr || c->index < missing->index))
+          missing = c;
       throw DataError(file, lines.number(), missing->name,
                       "the row has only " + std::to_string(cells.size()) +
                           " cells, but this is column " + std::to_string(missing->index + 1) +
@@ -1004,7 +1082,13 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
                             " is " + show(cells[i]) +
                             "; a decimal comma or a delimiter inside an unquoted cell?)");
     if (ct.index != kNone) {
-      const std::string_view cell = cells[ct.index];
+      std::string_view cell = cells[ct.index];
+      if (ct_time.index != kNone) {
+        stamp.assign(cell);
+        stamp += ' ';
+        stamp += cells[ct_time.index];
+        cell = stamp;
+      }
       double t = 0;
       if (date_time) {
         detail::TimeStamp ts;
@@ -1061,7 +1145,9 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
     for (const Column& c : cols)
       if (c.index != kNone)
         s += std::string(s.back() == ':' ? " " : ", ") + c.role + " = " + show(c.name) + " (" +
-             std::to_string(c.index + 1) + ")";
+             std::to_string(c.index + 1) +
+             (&c == &ct && ct_time.index != kNone ? "+" + std::to_string(ct_time.index + 1) : "") +
+             ")";
     if (no_time) s += "; no time column, rows " + num6g(*opt.sample_period) + " s apart";
     notes->push_back(s);
   }

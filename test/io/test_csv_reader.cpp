@@ -230,6 +230,56 @@ TEST_CASE("date-time stamps become seconds since the first sample") {
   CHECK(f.t == std::vector<double>{0, 30, 60});
 }
 
+TEST_CASE("a time stamp split over a date and a time column: --t DATE+TIME") {
+  CsvOptions o;
+  o.time_format = "%d.%m.%Y %H:%M:%S";
+  o.t_column = "Date+Time";
+  o.delimiter = ";";
+  std::vector<std::string> notes;
+  // Across midnight: the date column carries the day.
+  const std::string text =
+      "Date;Time;op;pv\n31.12.2023;23:59:50;1;2\n31.12.2023;23:59:55;2;3\n01.01.2024;00:00:00;3;"
+      "4\n";
+  const LoopData d = parse(text, o, &notes);
+  CHECK(d.t == std::vector<double>{0, 5, 10});
+  CHECK(d.op == std::vector<double>{1, 2, 3});
+  REQUIRE(notes.size() == 2);
+  CHECK(notes[0] == "columns: t = 'Date+Time' (1+2), op = 'op' (3), pv = 'pv' (4)");
+  CHECK(notes[1].find("t = 0 s is '31.12.2023 23:59:50' (line 2)") == 0);
+  // By numbers, and the columns need not be neighbours.
+  o.t_column = "4+1";
+  const LoopData e =
+      parse("Time;op;pv;Date\n12:00:00;1;2;03.10.2024\n12:00:01;2;3;03.10.2024\n", o);
+  CHECK(e.t == std::vector<double>{0, 1});
+  // A column whose own name holds '+' is that one column.
+  o.t_column = "a+b";
+  o.time_format = "seconds";
+  CHECK(parse("a+b;op;pv\n0;1;2\n1;2;3\n", o).t == std::vector<double>{0, 1});
+  // Errors name the stamp as given, its line, and what to do.
+  o.t_column = "Date+Time";
+  o.time_format = "%d.%m.%Y %H:%M:%S";
+  DataError err =
+      parse_error("Date;Time;op;pv\n31.12.2023;23:59:50;1;2\n31.12.2023;25:00:00;2;3\n", o);
+  CHECK(err.line == 3);
+  CHECK(err.column == "Date+Time");
+  CHECK(std::string(err.what()).find("'31.12.2023 25:00:00' does not match --time-format") !=
+        std::string::npos);
+  err = parse_error("Date;Time;op;pv\n31.12.2023;23:59:50;1;2\n31.12.2023\n", o);
+  CHECK(err.line == 3);
+  err = parse_error("Date;Time;op;pv\n31.12.2023;23:59:50;1;2\n", [&] {
+    CsvOptions b = o;
+    b.t_column = "Date+Clock";
+    return b;
+  }());
+  CHECK(std::string(err.what()).find("column 'Clock' (t): not found in the header row") != std::string::npos);
+  o.t_column = "Date+";
+  err = parse_error("Date;Time;op;pv\n31.12.2023;23:59:50;1;2\n31.12.2023;23:59:51;1;2\n", o);
+  CHECK(std::string(err.what()).find("a split time stamp is DATE+TIME") != std::string::npos);
+  o.t_column = "Date+op";
+  err = parse_error("Date;Time;op;pv\n31.12.2023;23:59:50;1;2\n31.12.2023;23:59:51;1;2\n", o);
+  CHECK(std::string(err.what()).find("chosen for both the time of day") != std::string::npos);
+}
+
 TEST_CASE("numeric time is kept as given") {
   const LoopData d = parse("t,op,pv\n1727992500,1,2\n1727992510,2,3\n");
   CHECK(d.t == std::vector<double>{1727992500, 1727992510});

@@ -86,6 +86,28 @@ TEST_CASE("auto: a semicolon export with decimal commas and dd.mm.yyyy stamps") 
   CHECK(p.sp == d.sp);
 }
 
+TEST_CASE("auto: a date column and a time-of-day column read as one stamp") {
+  std::vector<std::string> notes;
+  // A `Time` column of clock times after a `Date` column: the two, not Time alone.
+  const LoopData d = parse(
+      "Date;Time;FIC101.MV;FIC101.PV\n08.10.2024;23:59:58;50,0;41,0\n08.10.2024;23:59:59;50,5;"
+      "41,2\n09.10.2024;00:00:00;51,0;41,5\n09.10.2024;00:00:01;51,5;41,9\n",
+      auto_format(), &notes);
+  CHECK(d.t == std::vector<double>{0, 1, 2, 3});
+  CHECK(d.op == std::vector<double>{50.0, 50.5, 51.0, 51.5});
+  REQUIRE(!notes.empty());
+  CHECK(has(notes[0], "--time-format '%d.%m.%Y %H:%M:%S' --t Date+Time"));
+  // Other names: the first neighbouring pair that reads as stamps.
+  const LoopData e = parse(
+      "Tag,Uhrzeit,op,pv\n2024-10-08,12:00:00,1,2\n2024-10-08,12:00:10,2,3\n2024-10-08,12:00:20,"
+      "3,4\n",
+      auto_format(), &notes);
+  CHECK(e.t == std::vector<double>{0, 10, 20});
+  // A numeric time column named time is still that column.
+  CHECK(parse("date,time,op,pv\n1,0,1,2\n1,1,2,3\n", auto_format(), nullptr).t ==
+        std::vector<double>{0, 1});
+}
+
 TEST_CASE("auto: day/month order is refused unless the data decide it") {
   // All on 01/02 or 02/01: both orders read, both increase.
   const std::string ambiguous = historian(',', "01/02/2024 %02d:%02d:00", 30, false);
