@@ -35,7 +35,7 @@ struct ResidualCorrelation {
   // 2.576 sqrt(sum over |k| <= max_lag of r_e(k) r_u(k) / N): wider when both are coloured.
   double cross_correlation_band = 0.0;
 };
-// e and u of the same length (at least 2 max_lag + 2 samples, else empty results).
+// e and u of one length, at least 2 max_lag + 2 samples (else empty results).
 ResidualCorrelation residual_correlation(const std::vector<double>& e, const std::vector<double>& u,
                                          std::size_t max_lag);
 

@@ -50,12 +50,11 @@ double effective_sample_size(const std::vector<double>& y, const std::vector<dou
 ResidualCorrelation residual_correlation(const std::vector<double>& e, const std::vector<double>& u,
                                          std::size_t max_lag) {
   ResidualCorrelation r;
-  const std::size_t N = std::min(e.size(), u.size());
+  const std::size_t N = e.size();
   r.samples = N;
   r.max_lag = max_lag;
-  if (N < 2 * max_lag + 2) return r;
-  const std::vector<double> ae = autocorrelation(std::vector<double>(e.begin(), e.begin() + N));
-  const std::vector<double> au = autocorrelation(std::vector<double>(u.begin(), u.begin() + N));
+  if (u.size() != N || N < 2 * max_lag + 2) return r;
+  const std::vector<double> ae = autocorrelation(e), au = autocorrelation(u);
   if (ae.empty()) return r;  // a constant residual: nothing to test
   const double n = static_cast<double>(N);
   constexpr double z99 = 2.5758;  // the standard normal's two-sided 99 % quantile

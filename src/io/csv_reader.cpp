@@ -10,7 +10,9 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <system_error>
+#include <utility>
 
 #include "time_parse.hpp"
 #include "valvediag/data_checks.hpp"
@@ -419,6 +421,14 @@ void resolve(Column& col, const std::vector<std::string_view>& names, const std:
   throw DataError(file, header_line, spec, problem, col.role);
 }
 
+// --t DATE+TIME: the two column specs of a stamp split over a date and a time-of-day column
+// (exactly one '+'); nullopt for any other spec. Callers try the whole spec as one name first.
+std::optional<std::pair<std::string, std::string>> date_time_parts(const std::string& spec) {
+  const std::size_t plus = spec.find('+');
+  if (plus == std::string::npos || spec.find('+', plus + 1) != std::string::npos) return {};
+  return std::pair{spec.substr(0, plus), spec.substr(plus + 1)};
+}
+
 // ---- Format "auto": the layout sniffed from the first lines ----
 
 constexpr std::size_t kSniffLines = 200;
@@ -727,8 +737,7 @@ CsvOptions sniff_layout(std::string_view head, bool whole, const CsvOptions& opt
   };
   auto stamps_of = [&](std::size_t c) { return !matching_time_formats(column_cells(c)).empty(); };
   auto split_stamps_at = [&](std::size_t c) {
-    return c + 1 < names.size() && !stamps_of(c) &&
-           !matching_time_formats(joined_cells(c, c + 1)).empty();
+    return c + 1 < names.size() && !matching_time_formats(joined_cells(c, c + 1)).empty();
   };
   // --t for columns c and c + 1: by name when both names are plain, else by number.
   auto pair_spec = [&](std::size_t c) {
@@ -750,7 +759,7 @@ CsvOptions sniff_layout(std::string_view head, bool whole, const CsvOptions& opt
     std::size_t named = kNone;
     for (std::size_t c = 0; c < names.size(); ++c)
       if (iequal(names[c], "time")) named = c;
-    if (named != kNone && named > 0 && split_stamps_at(named - 1)) {
+    if (named != kNone && named > 0 && !stamps_of(named - 1) && split_stamps_at(named - 1)) {
       t_index = named - 1;
       t_split = true;
     } else if (named != kNone) {
@@ -758,6 +767,7 @@ CsvOptions sniff_layout(std::string_view head, bool whole, const CsvOptions& opt
     } else {
       for (std::size_t c = 0; c < names.size() && t_index == kNone; ++c)
         if (stamps_of(c)) t_index = c;
+      // No single column of stamps: the first neighbouring pair that reads as one.
       for (std::size_t c = 0; c + 1 < names.size() && t_index == kNone; ++c)
         if (split_stamps_at(c)) {
           t_index = c;
@@ -773,10 +783,10 @@ CsvOptions sniff_layout(std::string_view head, bool whole, const CsvOptions& opt
       Column ct("t", "--t", o.t_column, false);
       resolve(ct, views, file, used[header] + 1, false);
       t_index = ct.index;
-      const std::size_t plus = o.t_column.find('+');
-      if (t_index == kNone && plus != std::string::npos) {  // the user's DATE+TIME
-        Column date("t", "--t", o.t_column.substr(0, plus), false);
-        Column time("t", "--t", o.t_column.substr(plus + 1), false);
+      const auto parts = date_time_parts(o.t_column);
+      if (t_index == kNone && parts) {  // the user's DATE+TIME
+        Column date("t", "--t", parts->first, false);
+        Column time("t", "--t", parts->second, false);
         resolve(date, views, file, used[header] + 1, false);
         resolve(time, views, file, used[header] + 1, false);
         if (date.index != kNone && time.index != kNone) {
@@ -934,13 +944,12 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
   // A time stamp split over two columns, date and time: --t DATE+TIME (unless one column has
   // that very name). The two cells are read as one stamp, joined by a space.
   Column ct_time("t", "--t", "", true);
-  if (!no_time && opt.t_column.find('+') != std::string::npos) {
+  if (const auto parts = date_time_parts(opt.t_column); !no_time && parts) {
     Column whole("t", "--t", opt.t_column, false);
     resolve(whole, names, file, header_line, header_numeric);
-    const std::size_t plus = opt.t_column.find('+');
-    if (whole.index == kNone && opt.t_column.find('+', plus + 1) == std::string::npos) {
-      ct.spec = opt.t_column.substr(0, plus);
-      ct_time.spec = opt.t_column.substr(plus + 1);
+    if (whole.index == kNone) {
+      ct.spec = parts->first;
+      ct_time.spec = parts->second;
       if (ct.spec.empty() || ct_time.spec.empty())
         throw DataError(file, 0, "",
                         "--t " + show(opt.t_column) +

@@ -548,6 +548,13 @@ std::vector<std::size_t> path_points(const std::vector<double>& x, const std::ve
   return keep;
 }
 
+// A path x -> y over path_points as one data block.
+std::string path_block(Plot& p, const std::vector<double>& x, const std::vector<double>& y) {
+  std::vector<std::string> rows;
+  for (std::size_t k : path_points(x, y)) rows.push_back(dnum(x[k]) + " " + dnum(y[k]));
+  return p.block(rows);
+}
+
 // A path x -> y as two blocks: the segments where x rises and those where it falls, so a
 // hysteresis loop shows which way it is travelled. The direction turns only once x has come back
 // 1 % of its range from its last extreme: noise on x does not flicker the colours.
@@ -588,13 +595,7 @@ PlotJob signature_plot(const ReportContent& c) {
   const auto [up, down] = directional_path(p, d.op, f.x_hat);
   const bool pre = f.preisach.has_value();
   const bool mv = d.has_mv();
-  std::string m;
-  if (mv) {
-    std::vector<std::string> rows;
-    for (std::size_t k : path_points(d.op, d.mv))
-      rows.push_back(dnum(d.op[k]) + " " + dnum(d.mv[k]));
-    m = p.block(rows);
-  }
+  const std::string m = mv ? path_block(p, d.op, d.mv) : "";
   p.out() << "set xlabel 'OP (%)'\nset ylabel '"
           << (pre ? "estimated valve position (model units)" : "valve position (%)") << "'\n";
   // The Preisach output is in model units: the measured position then gets its own axis.
@@ -1164,10 +1165,10 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
                             resid_plot(content),
                             signature_plot(content),
                             preisach_plot(content),
+                            pv_op_plot(d),
                             bode_plot(content),
                             step_plot(content),
-                            ladder_plot(content),
-                            pv_op_plot(d)};
+                            ladder_plot(content)};
   HtmlReport rep;
   const DrawnPlots drawn = draw(jobs, opt, rep);
   auto fig = [&](std::ostringstream& o, std::size_t i) { figure(o, jobs[i], drawn, i, rep); };
@@ -1184,16 +1185,16 @@ HtmlReport html_report(const ReportContent& c, const ReportOptions& opt) {
   fig(o, 4);
   fig(o, 5);
   o << "</div>\n<div class=\"pair\">\n";
-  fig(o, 9);
+  fig(o, 6);
   o << "</div>\n</section>\n<section id=\"plots-process\">\n<h2>The process (linear "
        "block)</h2>\n";
-  fig(o, 6);
   fig(o, 7);
+  fig(o, 8);
   o << "</section>\n";
   where_section(o, content);
   diagnosis_section(o, content);
   o << "<section id=\"plots-ladder\">\n<h2>Model ladder: the error as effects are added</h2>\n";
-  fig(o, 8);
+  fig(o, 9);
   o << "</section>\n";
   ladder_section(o, content);
   page_foot(o, content.generator, content.generated, drawn);
