@@ -232,22 +232,38 @@ KStepFitness k_step_fitness(const ModelFit& f, const std::vector<double>& y, con
   return r;
 }
 
+// Whether a model with `dof` more parameters refutes a narrower one on samples [t0, t1) by the
+// likelihood-ratio test (99 %): fitness is 100 (1 - |e| / |y - mean|) on the same samples, so the
+// ratio of the residual sums of squares is the squared ratio of what each leaves, and the
+// statistic is 2 n_eff ln(norm ratio) over the narrower model's effective residual samples
+// (effective_sample_size of `narrow_sim`).
+bool lr_refutes(const std::vector<double>& y, const std::vector<double>& narrow_sim,
+                double fit_wide, double fit_narrow, std::size_t t0, std::size_t t1, double dof) {
+  if (!std::isfinite(fit_wide) || !std::isfinite(fit_narrow) || t1 <= t0 + 1 ||
+      narrow_sim.size() != y.size() || t1 > y.size())
+    return false;
+  const double n_eff = effective_sample_size(y, narrow_sim, t0, t1);
+  const double ratio = std::max(100.0 - fit_wide, 1e-9) / std::max(100.0 - fit_narrow, 1e-9);
+  return -2.0 * n_eff * std::log(ratio) > chi_square_quantile_99(std::max(1.0, dof));
+}
+
 // The pairs of trial effects where one is the other with a parameter held (Kano's stiction with
 // no jump is a deadband of the band S; He's with fd = fs one of 2 fs): narrower first.
 constexpr std::pair<const char*, const char*> kNestedEffects[] = {{"deadband", "stiction"}};
 
 // For each nested pair of `names` whose trials both fitted: which one ranks above the other,
-// keyed "a|b" both ways. The wider ranks above when it gains no less on either part and either
+// keyed (a, b) both ways. The wider ranks above when it gains no less on either part and either
 // gains `margin` points more held out (what any finding must gain to be supported) or refutes
 // the narrower on one part by the likelihood-ratio test (99 %, the extra parameters' degrees of
 // freedom, the narrower trial's effective residual samples there: effective_sample_size); else
 // the narrower, which the data do not refute.
-std::map<std::string, std::string> nested_winners(const std::vector<double>& y, double Ts,
-                                                  const std::vector<std::string>& names,
-                                                  const std::vector<ModelFit>& fits,
-                                                  const std::vector<Finding>& findings,
-                                                  double margin) {
-  std::map<std::string, std::string> out;
+using EffectPair = std::pair<std::string, std::string>;
+std::map<EffectPair, std::string> nested_winners(const std::vector<double>& y, double Ts,
+                                                 const std::vector<std::string>& names,
+                                                 const std::vector<ModelFit>& fits,
+                                                 const std::vector<Finding>& findings,
+                                                 double margin) {
+  std::map<EffectPair, std::string> out;
   auto index = [&names](const char* e) {
     return static_cast<std::size_t>(std::find(names.begin(), names.end(), e) - names.begin());
   };
@@ -266,26 +282,19 @@ std::map<std::string, std::string> nested_winners(const std::vector<double>& y, 
     bool wider = false;
     if (b.estimation_gain_percent > a.estimation_gain_percent &&
         finite_or(b.validation_gain_percent, -1e9) >= finite_or(a.validation_gain_percent, -1e9)) {
-      const double dof = std::max(
-          1.0, effect_parameter_count(wide, fw, Ts) - effect_parameter_count(narrow, fn, Ts));
-      // Fitness is 100 (1 - |e| / |y - mean|): the ratio of what each leaves is that of the
-      // residual norms, and the statistic is N ln(SSE ratio) = 2 N ln(norm ratio).
-      auto refutes = [&](double fit_w, double fit_n, std::size_t t0, std::size_t t1) {
-        if (!std::isfinite(fit_w) || !std::isfinite(fit_n) || t1 <= t0 + 1) return false;
-        const double n_eff = effective_sample_size(y, fn.y_sim, t0, t1);
-        const double ratio = std::max(100.0 - fit_w, 1e-9) / std::max(100.0 - fit_n, 1e-9);
-        return -2.0 * n_eff * std::log(ratio) > chi_square_quantile_99(dof);
-      };
+      const double dof =
+          effect_parameter_count(wide, fw, Ts) - effect_parameter_count(narrow, fn, Ts);
       // On the estimation part, or on the held-out part, which neither was fitted to; or held
       // out by the margin any finding must gain to be supported.
       wider = b.validation_gain_percent - a.validation_gain_percent >= margin ||
-              refutes(fw.fitness_percent, fn.fitness_percent, fn.first_sample, fn.estimation_end) ||
-              refutes(fw.validation_fitness_percent, fn.validation_fitness_percent,
-                      fn.estimation_end, y.size());
+              lr_refutes(y, fn.y_sim, fw.fitness_percent, fn.fitness_percent, fn.first_sample,
+                         fn.estimation_end, dof) ||
+              lr_refutes(y, fn.y_sim, fw.validation_fitness_percent, fn.validation_fitness_percent,
+                         fn.estimation_end, y.size(), dof);
     }
     const std::string winner = wider ? wide : narrow;
-    out[std::string(narrow) + "|" + wide] = winner;
-    out[std::string(wide) + "|" + narrow] = winner;
+    out[{narrow, wide}] = winner;
+    out[{wide, narrow}] = winner;
   }
   return out;
 }
@@ -484,21 +493,15 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       }
       pr->score =
           beyond > 0 ? 0.6 * std::clamp(beyond / left / 0.3, 0.0, 1.0) + 0.4 * pr->evidence : 0.0;
-      // Fitness is 100 (1 - |e| / |y - mean|) on (nearly) the same samples: the ratio of the
-      // residual sums of squares is the squared ratio of what each leaves.
       bool lr_passes = false;
       const bool over_trial = nf.estimation_gain_percent > 0;  // else: over the model
       const ModelFit& ref = over_trial ? nt : step.fit;
-      if (beyond > 0 && ref.y_sim.size() == y.size() && ref.estimation_end > ref.first_sample + 1) {
-        const double n_eff =
-            effective_sample_size(y, ref.y_sim, ref.first_sample, ref.estimation_end);
-        const double ratio = std::max(100.0 - pr->trial_fitness_percent, 1e-9) /
-                             std::max(100.0 - ref.fitness_percent, 1e-9);
+      if (beyond > 0) {
         const ModelFit& pt = fits[static_cast<std::size_t>(pr - step.findings.data())];
-        const double dof =
-            std::max(1.0, effect_parameter_count("preisach", pt, Ts) -
-                              (over_trial ? effect_parameter_count(nf.effect, nt, Ts) : 0.0));
-        lr_passes = -2.0 * n_eff * std::log(ratio) > chi_square_quantile_99(dof);
+        const double dof = effect_parameter_count("preisach", pt, Ts) -
+                           (over_trial ? effect_parameter_count(nf.effect, nt, Ts) : 0.0);
+        lr_passes = lr_refutes(y, ref.y_sim, pr->trial_fitness_percent, ref.fitness_percent,
+                               ref.first_sample, ref.estimation_end, dof);
       }
       pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent &&
                       beyond > 0 && lr_passes;
@@ -525,7 +528,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // test, not by scores: the residual hints point alike at both, and the wider model, fitting at
   // least as well, would win every near tie (measured: deadbands named stiction on an
   // estimation gain 0.02-0.5 points larger).
-  const std::map<std::string, std::string> wider_wins =
+  const std::map<EffectPair, std::string> wider_wins =
       nested_winners(y, Ts, names, fits, step.findings, margin);
   auto mutual = [](const std::string& a, const std::string& b) {
     return (is_memory_effect(a) && b == "disturbance") ||
@@ -533,7 +536,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   };
   const auto ranks_above = [margin, base_score, &size, &mutual, &wider_wins](const Finding& a,
                                                                              const Finding& b) {
-    if (const auto it = wider_wins.find(a.effect + "|" + b.effect); it != wider_wins.end())
+    if (const auto it = wider_wins.find({a.effect, b.effect}); it != wider_wins.end())
       return it->second == a.effect;
     const double hi = std::max(a.gain_percent, b.gain_percent);
     const double lo = std::min(a.gain_percent, b.gain_percent);

@@ -32,11 +32,11 @@ struct Case {
   std::string acted = "";  // the simulator's activity record to check ("" = hidden)
   // A confusion diagnose still makes on this loop, and why (printed; checked as a warning).
   std::string known = "";
-  // Other effects that model the same physics ("a|b"), accepted first when their trial predicts
+  // Other effects that model the same physics, accepted first when their trial predicts
   // the held-out part better (asymmetric stiction is stiction; He's average band is its simpler
   // model, and a deadband, stiction without the jump, the simpler one still when the data do not
   // refute it: docs/diagnosis.md).
-  std::string equivalent = "";
+  std::vector<std::string> equivalent = {};
 };
 
 Scenario named(const char* name) {
@@ -58,10 +58,20 @@ std::vector<Case> cases() {
       {"stenman (d 3)", "stiction", 1, [] { return named("stenman"); }},
       {"deadband (d 4)", "deadband", 1, [] { return named("deadband"); }},
       {"deadband (d 6)", "deadband", 2, [] { return with_valve("deadband", Deadband(6)); }},
-      {"asymmetric stiction", "preisach", 1, [] { return named("asymmetric-stiction"); },
-       "stiction", "", "stiction|deadband"},
-      {"asymmetric stiction", "preisach", 2, [] { return named("asymmetric-stiction"); },
-       "stiction", "", "stiction|deadband"},
+      {"asymmetric stiction",
+       "preisach",
+       1,
+       [] { return named("asymmetric-stiction"); },
+       "stiction",
+       "",
+       {"stiction", "deadband"}},
+      {"asymmetric stiction",
+       "preisach",
+       2,
+       [] { return named("asymmetric-stiction"); },
+       "stiction",
+       "",
+       {"stiction", "deadband"}},
       {"saturation (5-70 %)", "saturation", 1, [] { return named("saturation"); }},
       {"saturation (5-65 %)", "saturation", 2,
        [] { return with_valve("saturation", Saturation(5, 65)); }},
@@ -164,12 +174,9 @@ TEST_CASE("hidden effects are named first, with a clear gain and overlapping int
     // Second place counts only where diagnose says the first cannot be told from it.
     const bool second = f[1].effect == c.hidden && f[0].indistinguishable_from == c.hidden;
     // The equivalent effect first, when its trial predicts the held-out part better.
-    const Finding* eq = nullptr;
-    for (std::size_t at = 0; at < c.equivalent.size();) {
-      const std::size_t bar = std::min(c.equivalent.find('|', at), c.equivalent.size());
-      if (c.equivalent.compare(at, bar - at, f[0].effect) == 0) eq = find(f, f[0].effect);
-      at = bar + 1;
-    }
+    const bool first_equivalent =
+        std::find(c.equivalent.begin(), c.equivalent.end(), f[0].effect) != c.equivalent.end();
+    const Finding* eq = first_equivalent ? &f[0] : nullptr;
     const bool equivalent = eq && eq->validation_gain_percent > hidden->validation_gain_percent;
     // The simulator's record of where the effect acted, against the intervals the finding shows.
     const EffectActivity* acted = o.run.find(c.acted.empty() ? c.hidden : c.acted);
