@@ -668,17 +668,23 @@ LinearFit ArxEstimator::refine(const LinearFit& ls, const std::vector<double>& x
       wf[t] = sw;
       xf[t] = sx;
     }
-    // Normal equations accumulated row by row (no n x p matrix).
+    // Normal equations accumulated row by row (no n x p matrix), lower triangle. Plain loops:
+    // for p of a few, Eigen's dynamic-size rankUpdate spent more in its call than in the sums
+    // (half of a diagnosis's time), and the sums are the same products in the same order.
     Eigen::MatrixXd M = Eigen::MatrixXd::Zero(p, p);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(p);
     Eigen::VectorXd row(p);
+    double* m = M.data();
+    double* h = rhs.data();
+    const double* rw = row.data();
     for (Eigen::Index r = 0; r < n; ++r) {
       const std::size_t t = t0_ + static_cast<std::size_t>(r);
       for (int i = 1; i <= na; ++i) row[i - 1] = wf[t - static_cast<std::size_t>(i)];
       for (int k = 1; k <= nb; ++k) row[na + k - 1] = xf[t - static_cast<std::size_t>(nk + k)];
       row[p - 1] = 1.0;
-      M.selfadjointView<Eigen::Lower>().rankUpdate(row);
-      rhs += wf[t] * row;
+      for (int j = 0; j < p; ++j)
+        for (int i = j; i < p; ++i) m[i + j * p] += rw[j] * rw[i];
+      for (int i = 0; i < p; ++i) h[i] += wf[t] * rw[i];
     }
     M = M.selfadjointView<Eigen::Lower>();
     M.diagonal().array() += 1e-10 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
