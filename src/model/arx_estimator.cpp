@@ -670,7 +670,7 @@ LinearFit ArxEstimator::refine(const LinearFit& ls, const std::vector<double>& x
     }
     // Normal equations accumulated row by row (no n x p matrix), lower triangle. Plain loops:
     // for p of a few, Eigen's dynamic-size rankUpdate spent more in its call than in the sums
-    // (half of a diagnosis's time), and the sums are the same products in the same order.
+    // (half of a sanitized diagnosis's time; Release about even). Same products, same order.
     Eigen::MatrixXd M = Eigen::MatrixXd::Zero(p, p);
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(p);
     Eigen::VectorXd row(p);
