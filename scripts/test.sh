@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Installs what is missing, builds, runs every test through ctest, then the tests again under
-# AddressSanitizer + UndefinedBehaviorSanitizer.
+# Installs what is missing, builds, runs the tests through ctest, then again under
+# AddressSanitizer + UndefinedBehaviorSanitizer. The figure grids (ctest label `accuracy`) are
+# scripts/accuracy.sh's.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
@@ -11,7 +12,7 @@ phase "dependencies"
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release
 cmake --build build -j"$jobs"
 phase "Release build"
-ctest --test-dir build --output-on-failure -j"$jobs"
+ctest --test-dir build --output-on-failure -j"$jobs" -LE accuracy
 phase "Release tests"
 # The benchmarks are built (with -Werror) and run by the Release tree and their scripts.
 cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVALVEDIAG_SANITIZE=ON \
@@ -19,5 +20,5 @@ cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVALVEDIAG_SANITIZE=
 cmake --build build-asan -j"$jobs"
 phase "sanitizer build"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  ctest --test-dir build-asan --output-on-failure -j"$jobs"
+  ctest --test-dir build-asan --output-on-failure -j"$jobs" -LE accuracy
 phase "sanitizer tests"

@@ -10,6 +10,8 @@
 #include <sstream>
 #include <string>
 
+#include "../common/sanitized.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -357,10 +359,8 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
 // valve the closed-loop climb fits a Preisach valve (a memory that mimics the extra lag and the
 // load the controller fights); the measured position follows OP, so the verdict is no valve
 // problem, and with the position left out (--mv none) the model's verdict stands.
-TEST_CASE("diagnose reads friction from a recorded valve position") {
-#ifdef VALVEDIAG_SANITIZED
-  return;  // sanitized in valve_travel and in sweep_site's recorded valve position
-#endif
+TEST_CASE("diagnose reads friction from a recorded valve position" *
+          valvediag::test::release_only()) {
   const std::string csv = tmp("travel.csv");
   REQUIRE(run("simulate --scenario second-order --seed 5 --out " + csv).status == 0);
   auto r = run("diagnose " + csv + " --auto --no-history --json " + tmp("travel.json"));
@@ -507,10 +507,8 @@ TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   CHECK(run("fit " + tmp("db.csv") + hist + " --add wobble").status == 2);
 }
 
-TEST_CASE("fit --add preisach replaces stiction or deadband and says so") {
-#ifdef VALVEDIAG_SANITIZED
-  return;  // add_effect's replacement is sanitized in model; Preisach fits in every diagnosis
-#endif
+TEST_CASE("fit --add preisach replaces stiction or deadband and says so" *
+          valvediag::test::release_only()) {
   const std::string csv = tmp("nest.csv");
   REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --samples 1500 --out " + csv).status == 0);
   auto st = run("fit " + csv + " --model stiction --add preisach --no-history --json " +

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "../common/run_cli.hpp"
+#include "../common/sanitized.hpp"
 #include "../common/sqlite_exec.hpp"
 #include "../io/mat_fixtures.hpp"
 
@@ -245,10 +246,8 @@ TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only
             "runs(1), runs(2)"));
 }
 
-TEST_CASE("Tennessee Eastman m1d14: the cooling-water loop named by matrix columns") {
-#ifdef VALVEDIAG_SANITIZED
-  return;  // the same .mat path and diagnosis run sanitized in sweep_te
-#endif
+TEST_CASE("Tennessee Eastman m1d14: the cooling-water loop named by matrix columns" *
+          valvediag::test::release_only()) {
   const std::vector<std::string> loop{"--op", "51", "--pv", "21", "--sample-period", "36"};
   const CliResult list = run({"import", kTe14});
   CHECK(list.status == 0);

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/sanitized.hpp"
 #include "valvediag/identification.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/stiction_quantification.hpp"
@@ -241,7 +242,8 @@ FitOptions case_fit_options(const std::string& loop) {
 
 }  // namespace
 
-TEST_CASE("validation: He's fs and fd recovered from identified Preisach models of closed loops") {
+TEST_CASE("validation: He's fs and fd recovered from identified Preisach models of closed loops" *
+          valvediag::test::accuracy()) {
   // Cases 1-12 were chosen before the method was refined; 13-19 were added afterwards to check
   // that it generalises (other seeds, a second-order and an integrating process, small bands).
   const std::vector<Case> cases = {
@@ -253,11 +255,6 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
       {"so", 8.0, 1.5, 0.2, 24},     {"int", 5.0, 2.0, 0.1, 25},    {"so", 3.0, 0.5, 0.1, 26},
       {"fopdt", 2.0, 1.0, 0.05, 27},
   };
-#ifdef VALVEDIAG_SANITIZED
-  const std::size_t stride = 10;  // a sample under the sanitizers; the figures need every case
-#else
-  const std::size_t stride = 1;
-#endif
   const auto start = std::chrono::steady_clock::now();
   int ok_count = 0, preisach_ok = 0;
   std::printf(
@@ -268,7 +265,7 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
               "case", "loop", "noise", "L", "delta", "fs", "fd", "P fs^", "P fd^", "fs^", "fd^",
               "fit", "ok", "fs 95 %", "fd 95 %", "N_eff");
   std::size_t run = 0;
-  for (std::size_t i = 0; i < cases.size(); i += stride, ++run) {
+  for (std::size_t i = 0; i < cases.size(); ++i, ++run) {
     const Case& c = cases[i];
     const LoopData d = run_scenario(case_loop(c), c.seed, 0);
     const IdentificationResult r = identify(d.op, d.pv, case_fit_options(c.loop));
@@ -329,8 +326,7 @@ TEST_CASE("validation: He's fs and fd recovered from identified Preisach models 
 
 // The interval says how well the data fix the figures: the same loop with more measurement noise
 // (and so a flatter cost) must give a wider one, still holding the truth.
-#ifndef VALVEDIAG_SANITIZED  // three full quantifications; the interval's code runs in the others
-TEST_CASE("the stiction interval widens with the measurement noise") {
+TEST_CASE("the stiction interval widens with the measurement noise" * valvediag::test::accuracy()) {
   double previous = 0.0, first = 0.0;
   for (double noise : {0.1, 1.0, 3.0}) {
     CAPTURE(noise);
@@ -352,7 +348,6 @@ TEST_CASE("the stiction interval widens with the measurement noise") {
     previous = iv.fs_hi - iv.fs_lo;
   }
 }
-#endif
 
 // Paper Example 1 as `fit` sees it by default: 3000 samples, the full grid of orders. The coarse
 // search decides which valleys are polished; scored with the linear part fitted to the Preisach
@@ -361,7 +356,8 @@ TEST_CASE("the stiction interval widens with the measurement noise") {
 // poles 40 of 40 within 20 %; the Preisach valve's poles miss fd on seeds 24, 27 and 29 (and
 // were 1-2 % of travel low on fs on many others). With the default 8 both find seed 24's, and so
 // does the coarse lattice over every band: the window's ranking is compared without it.
-TEST_CASE("paper Example 1 with the default orders: each candidate's own poles find the true fd") {
+TEST_CASE("paper Example 1 with the default orders: each candidate's own poles find the true fd" *
+          valvediag::test::release_only()) {
   const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 24, 3000);
   const IdentificationResult r = identify(d.op, d.pv, FitOptions{});
   const auto q = quantify_stiction(r.model, d.op, d.pv);
@@ -369,7 +365,6 @@ TEST_CASE("paper Example 1 with the default orders: each candidate's own poles f
   CHECK(within(q.overall.fs_percent, 8.4));
   CHECK(within(q.overall.fd_percent, 3.5243));
   CHECK(q.overall.fd_percent == doctest::Approx(3.5243).epsilon(0.05));
-#ifndef VALVEDIAG_SANITIZED  // the same figures; the sanitizers only need one run
   StictionQuantificationOptions four;
   four.refine_starts = 4;
   four.global_starts = 0;
@@ -381,12 +376,12 @@ TEST_CASE("paper Example 1 with the default orders: each candidate's own poles f
   preisach_poles.refine_own_linear = false;
   const auto q1 = quantify_stiction(r.model, d.op, d.pv, preisach_poles);
   CHECK(!within(q1.overall.fd_percent, 3.5243));
-#endif
 }
 
 // The refinement's grid, polish and region grids run on several threads, each worker with a fit
 // of its own; the figures must be those of one thread, and the remembered costs those computed.
-TEST_CASE("the refined figures do not depend on the threads or on remembered costs") {
+TEST_CASE("the refined figures do not depend on the threads or on remembered costs" *
+          valvediag::test::release_only()) {
   const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 2, 3000);
   FitOptions fo;
   fo.na_max = fo.nb_max = 2;
@@ -401,13 +396,8 @@ TEST_CASE("the refined figures do not depend on the threads or on remembered cos
   REQUIRE(a.refined);
   CHECK(within(a.overall.fs_percent, 8.4));
   CHECK(within(a.overall.fd_percent, 3.5243));
-#ifdef VALVEDIAG_SANITIZED
-  // The odd split of the work runs sanitized; without the cost cache (simpler) in Release only.
-  for (const auto& b : {quantify_stiction(r.model, d.op, d.pv, three)}) {
-#else
   for (const auto& b : {quantify_stiction(r.model, d.op, d.pv, three),
                         quantify_stiction(r.model, d.op, d.pv, every)}) {
-#endif
     check_same_figures(b, a);
     CHECK(b.overall.fit_percent == a.overall.fit_percent);
     CHECK(b.interval.points == a.interval.points);
@@ -435,18 +425,15 @@ TEST_CASE("the taps' products from shifted sums give the plain sums' figures") {
 #endif
 }
 
-TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more") {
+TEST_CASE("an asymmetric valve in closed loop: the region table shows where it sticks more" *
+          valvediag::test::release_only()) {
   // PositionDependentStiction: fs 8, fd 3 below 40 % of travel, fs 3, fd 1 above 60 %
   // (interpolated between), in the fast loop with the OP held low, then high, then low.
   Scenario s = scenario_by_name("deadband");
   s.loop.valve = {PositionDependentStiction({{40.0, 8.0, 3.0}, {60.0, 3.0, 1.0}})};
   s.loop.disturbances = {};
   s.loop.setpoint = {{0.0, 50.0}, {100.0, 30.0}, {1000.0, 70.0}, {2000.0, 30.0}, {2600.0, 50.0}};
-#ifdef VALVEDIAG_SANITIZED
-  const std::uint64_t seeds[] = {31};  // the same path; the second seed's figures in Release
-#else
   const std::uint64_t seeds[] = {31, 32};
-#endif
   for (std::uint64_t seed : seeds) {
     CAPTURE(seed);
     const LoopData d = run_scenario(s, seed, 3000);
@@ -485,18 +472,14 @@ TEST_CASE("an asymmetric valve in closed loop: the region table shows where it s
 // at noise 1 the probe says fs 13.7 for a true 5. The coarse lattice over every band finds the
 // true valley anyway on most of these loops; it only adds valleys to polish, so its fit is never
 // worse than the window's alone.
-TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window misses") {
+TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window misses" *
+          valvediag::test::accuracy()) {
   const std::vector<Case> cases = {
       {"ex1", 8.4, 3.5243, 1.0, 1}, {"ex1", 4.0, 1.0, 1.0, 3},   {"ex1", 6.0, 3.0, 1.0, 4},
       {"fopdt", 8.0, 3.0, 1.0, 7},  {"fopdt", 5.0, 2.0, 1.0, 8}, {"fopdt", 3.0, 1.0, 1.0, 9},
       {"so", 5.0, 2.0, 1.0, 23},    {"so", 8.0, 1.5, 1.0, 24},   {"int", 5.0, 2.0, 1.0, 25},
       {"fopdt", 6.0, 2.0, 2.0, 22}, {"ex1", 10.0, 2.0, 2.0, 6},  {"so", 3.0, 0.5, 0.5, 26},
   };
-#ifdef VALVEDIAG_SANITIZED
-  const std::size_t stride = 12;  // one loop: the lattice's code, not its figures
-#else
-  const std::size_t stride = 1;
-#endif
   StictionQuantificationOptions window;
   window.global_starts = 0;
   int ok_window = 0, ok = 0;
@@ -505,7 +488,7 @@ TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window
   std::printf("%-5s %5s | %5s %5s | %5s %5s | %5s %5s %-4s %5s | %5s %5s %-4s %5s | %s\n", "loop",
               "noise", "fs", "fd", "P fs^", "P fd^", "fs^", "fd^", "", "fit", "fs^", "fd^", "",
               "fit", "fs 95 %");
-  for (std::size_t i = 0; i < cases.size(); i += stride, ++run) {
+  for (std::size_t i = 0; i < cases.size(); ++i, ++run) {
     const Case& c = cases[i];
     const LoopData d = run_scenario(case_loop(c), c.seed, 0);
     const IdentificationResult r = identify(d.op, d.pv, case_fit_options(c.loop));
@@ -533,17 +516,16 @@ TEST_CASE("noisy loops: the coarse lattice finds bands the biased probe's window
   // from the poles that scored them best, 11 (ex1 6/3 at noise 1, 10/2 at noise 2). The miss,
   // fopdt 8/3: the truth fits the data better than the estimate (cost 2923 against 7185), but
   // the lattice points near it rank about 1250th of 3080: its pit is narrower than a cell.
-#ifndef VALVEDIAG_SANITIZED
   CHECK(ok >= 11);
   CHECK(ok >= ok_window + 8);
-#endif
 }
 
 // The probe's band is known to a grid step, and NNLS shortens it: a valve that sticks by 2 % (it
 // jumps to the OP once they differ by 2 %) read "below the grid step 1.36 %". Refined on the data
 // the band is found; a linear valve in the same kind of loop stays without stiction, and its
 // interval reaches fs = 0.
-TEST_CASE("a band below the probe's grid step is refined on the data") {
+TEST_CASE("a band below the probe's grid step is refined on the data" *
+          valvediag::test::release_only()) {
   std::vector<double> op, pv;
   double x = 50, y = 0;
   for (int k = 0; k < 1200; ++k) {

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/sanitized.hpp"
 #include "valvediag/diagnosis.hpp"
 #include "valvediag/limit_cycle.hpp"
 #include "valvediag/mat_reader.hpp"
@@ -193,7 +194,8 @@ TEST_CASE("a sticky valve that makes its loop cycle is found, with its band") {
     }
 }
 
-TEST_CASE("an outside cycle and the linear scenarios are not stick-slip") {
+TEST_CASE("an outside cycle and the linear scenarios are not stick-slip" *
+          valvediag::test::release_only()) {
   SUBCASE("a slow outside oscillation that the controller compensates") {
     MiniLoop m;
     m.load_amp = 2.0;
@@ -209,9 +211,6 @@ TEST_CASE("an outside cycle and the linear scenarios are not stick-slip") {
   SUBCASE("linear-clean and paper-ex1-linear are never stick-slip") {
     for (const char* name : {"linear-clean", "paper-ex1-linear"}) {
       CAPTURE(name);
-#ifdef VALVEDIAG_SANITIZED
-      if (std::string(name) != "linear-clean") continue;  // the same path, once sanitized
-#endif
       const LoopData d = run_scenario(scenario_by_name(name), 1, 3000);
       const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("linear"));
       CHECK_FALSE(dg.limit_cycle.stick_slip);
@@ -223,10 +222,8 @@ TEST_CASE("an outside cycle and the linear scenarios are not stick-slip") {
 // IDV(14) it cycles with a period of about 270 s; in normal operation it does not cycle. The
 // trial fits alone cannot tell (36 s samples, the valve slips within a sample): the limit cycle
 // can.
-TEST_CASE("Tennessee Eastman: the valve-sticking fault is stiction, normal operation is not") {
-#ifdef VALVEDIAG_SANITIZED
-  return;  // 2 x 7201 samples: the sweep_te test runs the same path under the sanitizers
-#endif
+TEST_CASE("Tennessee Eastman: the valve-sticking fault is stiction, normal operation is not" *
+          valvediag::test::release_only()) {
   for (const char* run : {"m1d14", "m1d00"}) {
     CAPTURE(run);
     MatOptions o;

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/sanitized.hpp"
 #include "valvediag/scenarios.hpp"
 #include "valvediag/valve_effects.hpp"
 #include "valvediag/valve_travel.hpp"
@@ -19,12 +20,6 @@
 using namespace valvediag;
 
 namespace {
-
-#ifdef VALVEDIAG_SANITIZED
-constexpr bool kSanitized = true;  // a sample: memory checks, not the accuracy figures
-#else
-constexpr bool kSanitized = false;
-#endif
 
 // A position transmitter: white noise and a resolution step, as a positioner reports travel.
 std::vector<double> transmitted(std::vector<double> x, double noise, double step, unsigned seed) {
@@ -43,7 +38,8 @@ bool has(const std::string& s, const char* part) {
 
 }  // namespace
 
-TEST_CASE("every named scenario's valve is told from its measured position") {
+TEST_CASE("every named scenario's valve is told from its measured position" *
+          valvediag::test::accuracy()) {
   struct Case {
     const char* scenario;
     const char* verdict;
@@ -68,8 +64,8 @@ TEST_CASE("every named scenario's valve is told from its measured position") {
       {"slow-actuator", "no-valve-problem"},
   };
   // Under the sanitizers every fourth scenario, one seed: the same code on other valves.
-  for (std::size_t i = 0; i < std::size(cases); i += kSanitized ? 4 : 1)
-    for (unsigned seed = 1; seed <= (kSanitized ? 1u : 2u); ++seed) {
+  for (std::size_t i = 0; i < std::size(cases); ++i)
+    for (unsigned seed = 1; seed <= 2u; ++seed) {
       const Case& c = cases[i];
       const LoopData d = run_scenario(scenario_by_name(c.scenario), seed, 3000);
       REQUIRE(d.has_mv());
@@ -126,13 +122,14 @@ TEST_CASE("He's figures and the actuator lag are read back from noisy positions"
 
 // Seeded sweep: OP a random walk with steps (a controller's output), the valve He's with random
 // fs, fd, an actuator lag, a transmitter with calibration gain and offset, noise and resolution.
-TEST_CASE("seeded sweep: friction sized within 20 % or 0.5 % of travel, clean valves kept") {
+TEST_CASE("seeded sweep: friction sized within 20 % or 0.5 % of travel, clean valves kept" *
+          valvediag::test::accuracy()) {
   std::mt19937_64 rng(2026);
   std::uniform_real_distribution<double> U(0.0, 1.0);
   std::normal_distribution<double> N(0.0, 1.0);
   int sized = 0, sticky = 0, clean_kept = 0, clean = 0;
   std::printf("\n  fs    fd    tau  noise | fs^    fd^   verdict\n");
-  for (int c = 0; c < (kSanitized ? 4 : 40); ++c) {
+  for (int c = 0; c < 40; ++c) {
     const bool friction = c % 4 != 3;  // every fourth valve is healthy
     const double fs = friction ? 1.0 + 7.0 * U(rng) : 0.0;
     const double fd = fs * U(rng);

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "../common/plant_csv.hpp"
+#include "../common/sanitized.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/diagnosis.hpp"
 #include "valvediag/scenarios.hpp"
@@ -78,13 +79,9 @@ TEST_CASE("a compensated load step imitates a stuck valve, and the charged load 
   }
 }
 
-TEST_CASE("static curves and linear loops are not confirmed") {
-#ifdef VALVEDIAG_SANITIZED
-  const char* const cases[] = {"paper-ex1-linear"};
-#else
+TEST_CASE("static curves and linear loops are not confirmed" * valvediag::test::release_only()) {
   const char* const cases[] = {"paper-ex1-linear", "characteristic", "saturation", "second-order",
                                "third-order"};
-#endif
   for (const char* s : cases)
     for (unsigned seed : {1u, 2u}) {
       CAPTURE(s);
@@ -105,7 +102,8 @@ TEST_CASE("static curves and linear loops are not confirmed") {
 // the held-out tail; on the whole record it explains a third of what linear leaves, more than a
 // load curve or any memoryless effect (whole_record_test.hpp). FIC10201, a clean loop with
 // set-point steps, is where a memory model gains the most among the clean loops: under the bar.
-TEST_CASE("a valve that slips once in the held-out tail is confirmed on the whole record") {
+TEST_CASE("a valve that slips once in the held-out tail is confirmed on the whole record" *
+          valvediag::test::release_only()) {
   const fs::path dir = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops";
   const LoopData sticky =
       read_plant(dir / "stiction" / "stic_2411FIC20102_1113_0005_Stick1=0.69853.txt");

@@ -9,6 +9,7 @@
 #include <sstream>
 #include <string>
 
+#include "../common/sanitized.hpp"
 #include "page_checks.hpp"
 
 using report_test::check_self_contained;
@@ -97,7 +98,8 @@ TEST_CASE("report on a simulated sticky loop: one self-contained page with every
 
 // With no --model the page explains its verdict: it shows the model the verdict rests on (the end
 // of diagnose --auto's climb), not the ladder's last model or a bare Preisach plane.
-TEST_CASE("report without --model shows the model its verdict rests on") {
+TEST_CASE("report without --model shows the model its verdict rests on" *
+          valvediag::test::release_only()) {
   const std::string csv = sticky_loop("verdict-model.csv"), out = tmp("verdict-model.html");
   const Run r = run("report " + csv + " --no-plots --no-history --out " + out);
   INFO(r.out);
@@ -161,15 +163,11 @@ TEST_CASE("report without gnuplot: says which package to install, or writes note
   CHECK(h.find("id=\"where-intervals\"") != std::string::npos);
 }
 
-TEST_CASE("demo --offline diagnoses and writes the report, and says where it is") {
+TEST_CASE("demo --offline diagnoses and writes the report, and says where it is" *
+          valvediag::test::release_only()) {
   const std::string dir = tmp("demo-out");
   std::filesystem::remove_all(dir);
-#ifdef VALVEDIAG_SANITIZED
-  const std::string samples = " --samples 1500";  // its default 3000 in Release; the same path
-#else
-  const std::string samples;
-#endif
-  const Run r = run("demo --offline --out-dir " + dir + samples);
+  const Run r = run("demo --offline --out-dir " + dir);
   INFO(r.out);
   REQUIRE(r.status == 0);
   const std::string report = dir + "/report.html";

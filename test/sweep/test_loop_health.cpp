@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <random>
 
+#include "../common/sanitized.hpp"
 #include "valvediag/loop_health.hpp"
 #include "valvediag/mat_reader.hpp"
 
@@ -180,7 +181,8 @@ TEST_CASE("an OP-only record: OP's own oscillation and figures, no PV needed") {
 // 93 industrial loops of OP alone) carries each loop's `oscillation` label from its curators.
 // The detector (Thornhill's regularity of the ACF zero crossings, on OP about its mean) against
 // those labels; the table is printed, the floor holds what was measured.
-TEST_CASE("OP oscillation against the stiction database's oscillation labels") {
+TEST_CASE("OP oscillation against the stiction database's oscillation labels" *
+          valvediag::test::accuracy()) {
   const std::string path = std::string(VALVEDIAG_DATA_DIR) + "/benchmark.mat";
   REQUIRE(std::filesystem::exists(path));
   const MatFileInfo info = list_mat_loops(path);

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "../common/plant_csv.hpp"
+#include "../common/sanitized.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/data_error.hpp"
 #include "valvediag/loop_assessment.hpp"
@@ -24,12 +25,6 @@ using namespace valvediag;
 namespace fs = std::filesystem;
 
 namespace {
-
-#ifdef VALVEDIAG_SANITIZED
-constexpr bool kSanitized = true;  // 4 files: the path under the sanitizers, not the figures
-#else
-constexpr bool kSanitized = false;
-#endif
 
 // Loop tag: the file name up to its date, e.g. "2411FIC20102" (several files per loop).
 std::string loop_tag(const std::string& file) {
@@ -91,7 +86,8 @@ Thresholds choose(const std::vector<const Row*>& train) {
 
 }  // namespace
 
-TEST_CASE("whole-record thresholds chosen without each plant loop keep the sweep's accuracy") {
+TEST_CASE("whole-record thresholds chosen without each plant loop keep the sweep's accuracy" *
+          valvediag::test::accuracy()) {
   AssessOptions open;
   open.diagnose.whole_record_options.min_relative_gain = -std::numeric_limits<double>::infinity();
   open.diagnose.whole_record_options.min_gain_percent = -std::numeric_limits<double>::infinity();
@@ -101,7 +97,7 @@ TEST_CASE("whole-record thresholds chosen without each plant loop keep the sweep
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(root / label)) files.push_back(e.path());
     std::sort(files.begin(), files.end());
-    for (std::size_t i = 0; i < files.size(); i += kSanitized ? 12 : 1) {
+    for (std::size_t i = 0; i < files.size(); ++i) {
       Row r;
       r.file = files[i].filename().string();
       r.loop = loop_tag(r.file);
@@ -124,10 +120,6 @@ TEST_CASE("whole-record thresholds chosen without each plant loop keep the sweep
       r.relative_gain = w.relative_gain;
       rows.push_back(r);
     }
-  }
-  if (kSanitized) {
-    CHECK(rows.size() == 4);
-    return;
   }
   REQUIRE(rows.size() == 41);
 

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/sanitized.hpp"
 #include "valvediag/loop_assessment.hpp"
 #include "valvediag/loop_health.hpp"
 #include "valvediag/quiet_lead_in.hpp"
@@ -149,15 +150,12 @@ Scenario resting_loop(bool sticky) {
   return parse_scenario_toml(toml, "quiet-lead-in");
 }
 
-#ifdef VALVEDIAG_SANITIZED
-constexpr std::uint64_t kSeeds = 1;  // the path under the sanitizers, not the figures
-#else
 constexpr std::uint64_t kSeeds = 3;
-#endif
 
 }  // namespace
 
-TEST_CASE("assess_loop: a sticky valve after a quiet lead-in is judged on the part that moves") {
+TEST_CASE("assess_loop: a sticky valve after a quiet lead-in is judged on the part that moves" *
+          valvediag::test::release_only()) {
   AssessOptions keep;
   keep.keep_lead_in = true;
   for (std::uint64_t seed = 1; seed <= kSeeds; ++seed) {

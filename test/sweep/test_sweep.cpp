@@ -20,6 +20,7 @@
 
 #include "../../src/cli/isolated_jobs.hpp"
 #include "../common/plant_csv.hpp"
+#include "../common/sanitized.hpp"
 #include "../common/sqlite_exec.hpp"
 #include "valvediag/csv_reader.hpp"
 #include "valvediag/loop_assessment.hpp"
@@ -54,13 +55,10 @@ struct TempDb {
 
 }  // namespace
 
-#ifdef VALVEDIAG_SANITIZED
-constexpr std::size_t kSamples = 2000;  // the same path; a climb runs about ten times slower there
-#else
 constexpr std::size_t kSamples = 3000;
-#endif
 
-TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean one is not") {
+TEST_CASE("assess_loop: a sticky loop is called stiction with its band, a clean one is not" *
+          valvediag::test::release_only()) {
   const LoopData sticky = run_scenario(scenario_by_name("paper-ex1"), 1, kSamples);
   const LoopAssessment s = assess_loop(sticky, "FIC101");
   INFO(s.reason);
@@ -179,7 +177,8 @@ TEST_CASE("assess_loop: a band found on the whole record comes with its range") 
 // A valve that slips about once in the record: its band fits up to the record's OP span, the
 // search's top, so the data bound it from below only and the range says so (stiction_hi_open)
 // instead of passing the span off as an upper bound.
-TEST_CASE("assess_loop: a band the data do not bound from above is open above") {
+TEST_CASE("assess_loop: a band the data do not bound from above is open above" *
+          valvediag::test::release_only()) {
   const LoopData d = sticky_plant_record("stic_2411FIC20102_0823_1527_Stick1=0.84495.txt");
   const LoopAssessment a = assess_loop(d, "FIC20102");
   INFO(a.reason);
@@ -341,14 +340,11 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
 }
 
 TEST_CASE(
-    "split check: a clear sticky valve holds at every split; the summary marks one that does not") {
+    "split check: a clear sticky valve holds at every split; the summary marks one that does not" *
+    valvediag::test::release_only()) {
   AssessOptions opt;
   const LoopData sticky = run_scenario(scenario_by_name("paper-ex1"), 1, kSamples);
-#ifdef VALVEDIAG_SANITIZED
-  opt.check_splits = {0.25};  // each split is a whole assessment: one runs the path sanitized
-#else
   opt.check_splits = {0.25, 0.35};
-#endif
   const LoopAssessment s = assess_loop(sticky, "FIC101", opt);
   INFO(s.reason);
   CHECK(s.verdict == "stiction");

@@ -14,6 +14,7 @@
 
 #include "../common/plant_csv.hpp"
 #include "../common/run_cli.hpp"
+#include "../common/sanitized.hpp"
 #include "valvediag/sim_plc.hpp"
 #include "valvediag/site_config.hpp"
 
@@ -156,15 +157,10 @@ TEST_CASE("sweep --record: a site from the simulated PLC, ranked, stored, trend;
 TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shards merge back") {
   const std::string sticky = (kTmp / "sticky.csv").string(), clean = (kTmp / "clean.csv").string(),
                     bad = (kTmp / "bad.csv").string(), tiny = (kTmp / "tiny.csv").string();
-#ifdef VALVEDIAG_SANITIZED
-  const std::string samples = "2000";  // the same path; a climb runs about ten times slower there
-#else
-  const std::string samples = "3000";
-#endif
-  REQUIRE(run({"simulate", "--scenario", "paper-ex1", "--seed", "2", "--samples", samples, "--out",
+  REQUIRE(run({"simulate", "--scenario", "paper-ex1", "--seed", "2", "--samples", "3000", "--out",
                sticky})
               .status == 0);
-  REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "2", "--samples", samples,
+  REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "2", "--samples", "3000",
                "--out", clean})
               .status == 0);
   REQUIRE(run({"simulate", "--scenario", "linear-clean", "--seed", "3", "--samples", "120", "--out",
@@ -178,20 +174,25 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
   // Each sweep runs two 3000-sample diagnoses side by side: minutes under the sanitizers on a
   // loaded machine, so each run gets the time of the test's own limit.
   constexpr double kLimit = 600.0;
-  auto r = run({"sweep", sticky, clean, bad, tiny, "--jobs", "2", "--json", all}, kLimit);
+  // Sanitized, the files no climb is run on: the sweep's reading, isolation and output paths (a
+  // climb runs in sweep_site there; the verdicts and sweep-merge are Release's).
+  const std::vector<std::string> files = test::kSanitizedBuild
+                                             ? std::vector<std::string>{bad, tiny}
+                                             : std::vector<std::string>{sticky, clean, bad, tiny};
+  std::vector<std::string> args{"sweep", "--jobs", "2", "--json", all};
+  args.insert(args.end(), files.begin(), files.end());
+  auto r = run(args, kLimit);
   INFO(r.out);
   CHECK(r.status == 0);
   const auto j = read_json(all);
-  REQUIRE(j["loops"].size() == 4);
-  CHECK((*loop_in(j, "sticky"))["verdict"] == "stiction");
-  CHECK((*loop_in(j, "clean"))["verdict"] == "no-valve-problem");
+  REQUIRE(j["loops"].size() == files.size());
   CHECK((*loop_in(j, "bad"))["verdict"] == "error");
   CHECK((*loop_in(j, "bad"))["error"].get<std::string>().find("bad.csv:3") != std::string::npos);
   CHECK((*loop_in(j, "tiny"))["verdict"] == "not-enough-data");
+  if (test::kSanitizedBuild) return;
+  CHECK((*loop_in(j, "sticky"))["verdict"] == "stiction");
+  CHECK((*loop_in(j, "clean"))["verdict"] == "no-valve-problem");
 
-#ifdef VALVEDIAG_SANITIZED
-  return;  // two more sweeps of the same diagnoses; sweep-merge's own checks run in Release
-#endif
   // Two shards cover the list once; sweep-merge gives the same verdicts.
   const std::string p0 = (kTmp / "part-0.json").string(), p1 = (kTmp / "part-1.json").string();
   CHECK(run({"sweep", sticky, clean, bad, tiny, "--shard", "0/2", "--json", p0, "--quiet"}, kLimit)
@@ -225,16 +226,11 @@ TEST_CASE("sweep over files: a bad file is reported and the sweep goes on; shard
 
 // Issue 5: the reactor cooling-water loop of the Tennessee Eastman benchmark, normal operation and
 // the valve-sticking fault IDV(14), by matrix columns (OP = XMV(10), PV = XMEAS(21)).
-TEST_CASE("sweep over the Tennessee Eastman runs: the sticking fault is stiction, normal is not") {
+TEST_CASE("sweep over the Tennessee Eastman runs: the sticking fault is stiction, normal is not" *
+          valvediag::test::release_only()) {
   const std::string te = std::string(VALVEDIAG_DATA_DIR) + "/tennessee-eastman/";
   const std::string out = (kTmp / "te.json").string();
-#ifdef VALVEDIAG_SANITIZED
-  // The faulty run only: the .mat reader and a stick-slip climb; the normal run's verdict is a
-  // figure, checked in Release.
-  const std::vector<std::string> files{te + "m1d14.mat"};
-#else
   const std::vector<std::string> files{te + "m1d00.mat", te + "m1d14.mat"};
-#endif
   std::vector<std::string> args{"sweep"};
   args.insert(args.end(), files.begin(), files.end());
   for (const char* a : {"--op", "51", "--pv", "21", "--sample-period", "36", "--json"})
@@ -252,23 +248,17 @@ TEST_CASE("sweep over the Tennessee Eastman runs: the sticking fault is stiction
   CHECK((*faulty)["stiction_percent"].get<double>() > 1.5);
   CHECK((*faulty)["stiction_percent"].get<double>() < 4.0);
   CHECK((*faulty)["health"]["oscillating"] == true);
-  if (files.size() == 1) return;
   const nlohmann::json* normal = loop_in(j, "m1d00");
   REQUIRE(normal != nullptr);
   CHECK((*normal)["verdict"] == "no-valve-problem");
   CHECK((*normal)["limit_cycle"]["stick_slip"] == false);
 }
 
-#ifdef VALVEDIAG_SANITIZED
-constexpr bool kSanitized = true;  // samples of the cases below: memory checks, not figures
-#else
-constexpr bool kSanitized = false;
-#endif
-
 // Issue 5: the real plant loops labelled by their provider (shared/data/plant-loops), swept as
 // historian exports; the confusion table of verdict against label as the README shows it. The
 // file names' `Stick1=` figure is the provider's and is never read.
-TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
+TEST_CASE("sweep over the plant loops: verdict against the provider's labels" *
+          valvediag::test::accuracy()) {
   const fs::path root = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops";
   std::vector<std::string> args{"sweep"};
   std::size_t n = 0;
@@ -276,8 +266,7 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
     std::vector<std::string> files;
     for (const auto& e : fs::directory_iterator(root / label)) files.push_back(e.path().string());
     std::sort(files.begin(), files.end());
-    for (std::size_t i = 0; i < files.size(); i += kSanitized ? 10 : 1, ++n)
-      args.push_back(files[i]);
+    for (std::size_t i = 0; i < files.size(); ++i, ++n) args.push_back(files[i]);
   }
   const std::string out = (kTmp / "plant.json").string();
   args = test::with_plant_layout(args);
@@ -308,7 +297,6 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
     for (const char* v : verdicts) std::printf(" %d |", table[label][v]);
     std::printf("\n");
   }
-  if (kSanitized) return;
   const double found = table["stiction"]["stiction"] / 18.0;
   const double clean = 1.0 - table["no-stiction"]["stiction"] / 23.0;
   std::printf("balanced accuracy %.1f %% (sticky found %.1f %%, clean kept %.1f %%)\n",
@@ -337,8 +325,8 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels") {
 // climb goes on from `integrator`, as an engineer would, when that fits better on both parts. Its
 // page shows that model and the whole-record test against it. Its OP rests for 48 minutes first:
 // the whole record is what this case is about (--keep-lead-in).
-TEST_CASE(
-    "sweep --reports: a level whose `linear` is stable only by force climbs from integrator") {
+TEST_CASE("sweep --reports: a level whose `linear` is stable only by force climbs from integrator" *
+          valvediag::test::release_only()) {
   const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
                         "stic_2411LIC30501_1212_0008_Stick1=0.95907.txt";
   const test::CliResult fit =
@@ -397,14 +385,13 @@ TEST_CASE(
 // twice, OP winds 2 % while PV stays put, and PV drops at once: a stuck valve that slips. On the
 // whole record the noise of the rest outweighs it; from a little before OP moves, the climb finds
 // He's stiction with a band of about the 2 % OP wound.
-TEST_CASE("sweep --reports: a record at rest until its last half hour is judged after its rest") {
+TEST_CASE("sweep --reports: a record at rest until its last half hour is judged after its rest" *
+          valvediag::test::release_only()) {
   const fs::path file = fs::path(VALVEDIAG_DATA_DIR) / "plant-loops" / "stiction" /
                         "stic_2411FIC20102_20241226_0953_Stick1=0.681163.txt";
   const std::string dj = (kTmp / "rest.json").string();
-  // Under the sanitizers without the split check: its two more climbs cost two thirds of the
-  // command, and they run sanitized in "split check" (sweep_split) and sweep --split-check.
-  std::vector<std::string> dargs{"diagnose", file.string(), "--auto", "--no-history", "--json", dj};
-  if (!kSanitized) dargs.push_back("--split-check");
+  const std::vector<std::string> dargs{"diagnose",      file.string(), "--auto", "--no-history",
+                                       "--split-check", "--json",      dj};
   const test::CliResult diag = run(test::with_plant_layout(dargs), 600.0);
   INFO(diag.out);
   REQUIRE(diag.status == 0);
@@ -412,21 +399,18 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
                       "5730 s OP holds within a quarter of its span") != std::string::npos);
   CHECK(diag.out.find("verdict:   stiction") != std::string::npos);
   const nlohmann::json d = read_json(dj);
-  if (!kSanitized) {
-    // The slip explains the part after the rest whichever share of it is held out.
-    CHECK(diag.out.find("splits:    stiction with 0.25 held out; stiction with 0.35 held out; 3 "
-                        "of 3 shares give stiction") != std::string::npos);
-    REQUIRE(d["split_check"].size() == 2);
-    CHECK(d["split_check"][1]["validate"].get<double>() == doctest::Approx(0.35));
-    CHECK(d["split_check"][1]["verdict"] == "stiction");
-  }
+  // The slip explains the part after the rest whichever share of it is held out.
+  CHECK(diag.out.find("splits:    stiction with 0.25 held out; stiction with 0.35 held out; 3 "
+                      "of 3 shares give stiction") != std::string::npos);
+  REQUIRE(d["split_check"].size() == 2);
+  CHECK(d["split_check"][1]["validate"].get<double>() == doctest::Approx(0.35));
+  CHECK(d["split_check"][1]["verdict"] == "stiction");
   CHECK(d["analysed_from_s"].get<double>() == 5290.0);
   CHECK(d["unusable_reason"] == "");  // a sweep judges it too
   CHECK(d["stiction_percent"].get<double>() > 1.0);
   CHECK(d["stiction_percent"].get<double>() < 3.0);
-  // The whole record, and report's both modes: Release; under the sanitizers report once (the
-  // same paths, a climb each).
-  if (!kSanitized) {
+  // The whole record.
+  {
     const test::CliResult whole = run(test::with_plant_layout({"diagnose", file.string(), "--auto",
                                                                "--no-history", "--keep-lead-in"}),
                                       600.0);
@@ -437,7 +421,6 @@ TEST_CASE("sweep --reports: a record at rest until its last half hour is judged 
 
   // `report` analyses the same part as the diagnose command its page quotes, in both modes.
   for (const bool keep : {false, true}) {
-    if (keep && kSanitized) continue;
     CAPTURE(keep);
     const std::string page = (kTmp / "rest-report.html").string();
     std::vector<std::string> args{"report",       file.string(), "--model", "linear",
