@@ -178,7 +178,8 @@ TEST_CASE("import a loop of a .mat file to CSV, to a recording, or fit the .mat 
   }
 }
 
-TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only loops") {
+TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only loops" *
+          valvediag::test::release_only()) {
   const std::string mat = tmp("sweep-runs.mat");
   valvediag::test::write_runs_file(mat, MAT_FT_MAT5, MAT_COMPRESSION_NONE, 1500);
   const std::string out = tmp("sweep-mat.json");

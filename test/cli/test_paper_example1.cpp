@@ -3,12 +3,14 @@
 
 #include <cstdio>
 
+#include "../common/sanitized.hpp"
 #include "valvediag/identification.hpp"
 #include "valvediag/scenarios.hpp"
 
 using namespace valvediag;
 
-TEST_CASE("paper Example 1: fitness at least 94 % over the full grid") {
+TEST_CASE("paper Example 1: fitness at least 94 % over the full grid" *
+          valvediag::test::release_only()) {
   const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 0);
   const auto r = identify(d.op, d.pv, FitOptions{});
   const auto& s = r.best.structure;

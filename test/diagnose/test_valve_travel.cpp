@@ -86,7 +86,8 @@ TEST_CASE("every named scenario's valve is told from its measured position" *
     }
 }
 
-TEST_CASE("He's figures and the actuator lag are read back from noisy positions") {
+TEST_CASE("He's figures and the actuator lag are read back from noisy positions" *
+          valvediag::test::release_only()) {
   SUBCASE("paper Example 1: fs 8.4, fd 3.52") {
     const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 3000);
     const ValveTravel v = check_valve_travel(d.op, transmitted(d.mv, 0.2, 0.1, 3), 0.5);

@@ -8,6 +8,7 @@
 #include <tuple>
 #include <vector>
 
+#include "../common/sanitized.hpp"
 #include "valvediag/effect_estimators.hpp"
 
 using namespace valvediag;
@@ -113,7 +114,8 @@ void check_close(const LinearFit& got, const LinearFit& want) {
 
 }  // namespace
 
-TEST_CASE("ArxEstimator: the pruned, batched structure search gives the plain scan's answer") {
+TEST_CASE("ArxEstimator: the pruned, batched structure search gives the plain scan's answer" *
+          valvediag::test::release_only()) {
   // na 1..5 and nb 1..3 cover the unrolled kernels (orders to 4) and the general one (na 5); nk
   // to 13 gives batches of four and a partial last batch.
   int cases = 0;

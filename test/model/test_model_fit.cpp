@@ -248,7 +248,7 @@ TEST_CASE("actuator lag: tau and the process lag as a pair") {
   CHECK(f.fitness_percent > lin.fitness_percent + 1.5);
 }
 
-TEST_CASE("stiction + saturation are fitted jointly") {
+TEST_CASE("stiction + saturation are fitted jointly" * valvediag::test::release_only()) {
   const LoopData d = custom_loop({HeStiction(5.0, 2.0), Saturation(0.0, 52.0)}, 0.1, false, 10);
   const ModelFit f = fit(d, "stiction+saturation", split());
   show(f);
@@ -478,7 +478,8 @@ TEST_CASE("paper comparison: Preisach vs He vs Kano on simulated loops" *
 // (fs 8, fd 3 up to 20 % of travel, fs 1.5, fd 0.5 from 40 %): it nests He's model, so it never
 // fits the estimation part worse; it finds which side sticks most and predicts the held-out
 // part better. `preisach` alone (auto) keeps it over 40-odd Preisach weights by BIC.
-TEST_CASE("preisach: position-dependent friction on the asymmetric valve") {
+TEST_CASE("preisach: position-dependent friction on the asymmetric valve" *
+          valvediag::test::release_only()) {
   const LoopData d = scenario_data("asymmetric-stiction", 1);
   const ModelFit p = fit(d, "preisach:position-dependent", split()),
                  h = fit(d, "stiction", split());
@@ -493,9 +494,6 @@ TEST_CASE("preisach: position-dependent friction on the asymmetric valve") {
   CHECK(param(p, "preisach", "position") > 15.0);
   CHECK(param(p, "preisach", "position") < 50.0);
   CHECK(effect_parameter_count("preisach", p, d.sample_period()) == 5.0);
-#ifdef VALVEDIAG_SANITIZED
-  return;  // the figures below: both estimators again (their paths ran above and in diagnosis)
-#endif
   const ModelFit a = fit(d, "preisach", split());
   CHECK(to_string(a.spec) == "preisach");
   CHECK(a.effects[0].variant == "position-dependent");

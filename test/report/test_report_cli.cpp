@@ -60,7 +60,8 @@ std::string sticky_loop(const std::string& name) {
 
 }  // namespace
 
-TEST_CASE("report on a simulated sticky loop: one self-contained page with every plot") {
+TEST_CASE("report on a simulated sticky loop: one self-contained page with every plot" *
+          valvediag::test::release_only()) {
   const std::string csv = sticky_loop("sticky.csv"), out = tmp("sticky.html");
   std::filesystem::remove(out);
   const std::string hist = " --history " + csv + ".history.json";

@@ -24,16 +24,8 @@ namespace fs = std::filesystem;
 namespace {
 const fs::path kTmp = VALVEDIAG_TMP;
 
-#ifdef VALVEDIAG_SANITIZED
-// A climb runs about ten times slower under the sanitizers (this file took 5 minutes): one record
-// through every command checks the memory; the agreement, the history and loop_verdict itself
-// are measured in Release (report's reuse of the climb runs in sweep --reports' case, and
-// loop_verdict in every assess_loop case).
-constexpr bool kSanitized = true;
-#else
-constexpr bool kSanitized = false;
-#endif
-
+// Release only (valvediag::test::release_only()): a climb runs about ten times slower under the
+// sanitizers, and each command's climb runs sanitized in the CLI's diagnose --auto and sweep_site.
 test::CliResult run(const std::vector<std::string>& args) {
   return test::run_cli(VALVEDIAG_BIN, args, kTmp, 240.0);
 }
@@ -67,11 +59,11 @@ std::string page_verdict(const std::string& html) {
   return html.substr(from, html.find('<', from) - from);
 }
 
-// A simulated record of 2000 samples (1000 under the sanitizers) with no model history.
+// A simulated record of 2000 samples with no model history.
 std::string simulated(const std::string& scenario, int seed) {
   const std::string csv = (kTmp / ("one-" + scenario + ".csv")).string();
   const test::CliResult s = run({"simulate", "--scenario", scenario, "--seed", std::to_string(seed),
-                                 "--samples", kSanitized ? "1000" : "2000", "--out", csv});
+                                 "--samples", "2000", "--out", csv});
   REQUIRE(s.status == 0);
   fs::remove(csv + ".history.json");
   return csv;
@@ -169,7 +161,8 @@ void check_agreement(const std::vector<std::string>& files, const std::string& s
 
 }  // namespace
 
-TEST_CASE("one verdict: diagnose, diagnose --auto, report, sweep and fit --verdict agree") {
+TEST_CASE("one verdict: diagnose, diagnose --auto, report, sweep and fit --verdict agree" *
+          valvediag::test::release_only()) {
   check_agreement({simulated("characteristic", 1)}, "");
 }
 
