@@ -60,12 +60,6 @@ std::string loop_csv(std::size_t n, bool constant_op = false, double band = 2.0)
 
 const std::string kSmallGrid = " --na-max 1 --nb-max 1 --nk-max 2 --L-max 8 ";
 
-#ifdef VALVEDIAG_SANITIZED
-constexpr bool kSanitized = true;  // a diagnosis runs about ten times slower there
-#else
-constexpr bool kSanitized = false;
-#endif
-
 }  // namespace
 
 // The README is for users (issue 35): what it does, how to start, what the verdicts mean. Method,
@@ -313,7 +307,7 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   // Those figures came from the recorded valve position. Without it, from the fitted He valve,
   // with the range of fs the data fit as well (its band's profile likelihood). (A second climb:
   // Release only; the band's range runs sanitized in sweep_assess.)
-  if (!kSanitized) {
+  if (!valvediag::test::kSanitizedBuild) {
     const auto n =
         run("diagnose " + tmp("diag.csv") + " --auto --mv none --json " + tmp("diag-nomv.json"));
     REQUIRE(n.status == 0);

@@ -1,7 +1,9 @@
 // One verdict (issue 33, item 4): every command that gives a loop's verdict calls loop_verdict(),
 // so the same file and options give the same verdict and stiction size from diagnose (with or
 // without --auto, whatever --model), report, sweep and fit --verdict; and a model history on
-// disk never changes it.
+// disk never changes it. Every case here is release_only(): a climb runs about ten times slower
+// under the sanitizers, and each command's climb runs sanitized in the CLI's diagnose --auto and
+// in sweep_site.
 #include <doctest/doctest.h>
 
 #include <cmath>
@@ -24,8 +26,6 @@ namespace fs = std::filesystem;
 namespace {
 const fs::path kTmp = VALVEDIAG_TMP;
 
-// Release only (valvediag::test::release_only()): a climb runs about ten times slower under the
-// sanitizers, and each command's climb runs sanitized in the CLI's diagnose --auto and sweep_site.
 test::CliResult run(const std::vector<std::string>& args) {
   return test::run_cli(VALVEDIAG_BIN, args, kTmp, 240.0);
 }
