@@ -2,6 +2,7 @@
 // the recorder and the identification core.
 #pragma once
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,10 @@ struct LoopData {
   std::vector<double> sp;  // set point (empty when not available)
   std::vector<double> mv;  // measured valve position x (empty when not available)
   std::string source;      // where the data came from (file name, scenario), for messages
+  // The date and time of t = 0 as seconds since 1970-01-01 00:00:00 of the stamps as the data
+  // gives them (a historian's local time read without zone, a recording's UTC); NaN when the
+  // data has no date-time stamps. Plots and tables show t on this clock.
+  double clock_at_zero_s = std::numeric_limits<double>::quiet_NaN();
 
   std::size_t size() const { return t.size(); }
   bool has_pv() const { return !pv.empty(); }

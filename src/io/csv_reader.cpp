@@ -1111,6 +1111,7 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
         if (d.t.empty()) {
           t0 = ts;
           first_time.assign(cell);
+          d.clock_at_zero_s = static_cast<double>(ts.seconds) + ts.fraction;
         }
         t = static_cast<double>(ts.seconds - t0.seconds) + (ts.fraction - t0.fraction);
       } else {

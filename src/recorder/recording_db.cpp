@@ -579,6 +579,9 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
   LoopData& d = out.data;
   d.source = db_path + " loop " + name + " (run " + std::to_string(out.run) + ")";
   for (auto k : ticks) d.t.push_back(static_cast<double>(k) * P);
+  // Tick 0 is the run's start on the recorder's clock; an imported run's start is the import's
+  // time, not the data's, so it has none.
+  if (out.run_info.status != "imported") d.clock_at_zero_s = utc_seconds(out.run_info.started_utc);
   d.op = std::move(op);
   d.pv = std::move(pv);
   if (has_sp && sp_ok) d.sp = std::move(sp);

@@ -7,6 +7,7 @@
 #include <complex>
 #include <cstdint>
 #include <cstdio>
+#include <ctime>
 #include <future>
 #include <numbers>
 #include <sstream>
@@ -306,6 +307,45 @@ std::string label_text(const std::string& s) {
   return o.size() > 40 ? o.substr(0, 40) : o;
 }
 
+// The time axis of the trend plots: seconds from t = 0, or the data's own clock when it has
+// date-time stamps (LoopData::clock_at_zero_s), labelled as the stamps read.
+struct TimeAxis {
+  double origin = 0.0;  // added to t
+  bool clock = false;
+  double span = 0.0;  // seconds the record covers
+
+  explicit TimeAxis(const LoopData& d) {
+    clock = std::isfinite(d.clock_at_zero_s) && !d.t.empty();
+    if (clock) origin = d.clock_at_zero_s;
+    if (!d.t.empty()) span = d.t.back() - d.t.front();
+  }
+  double at(double t) const { return origin + t; }
+  // An x coordinate: the clock needs more digits than the data's values.
+  std::string x(double t) const {
+    if (!std::isfinite(t)) return "?";
+    char buf[40];
+    std::snprintf(buf, sizeof buf, "%.13g", at(t));
+    return buf;
+  }
+  // gnuplot's x tick format and label for the bottom plot of a figure.
+  std::string labels(const LoopData& d) const {
+    if (!clock) return "set format x '%g'\nset xlabel 't (s)'\n";
+    const char* fmt = span <= 600 ? "%H:%M:%S" : span <= 86400 ? "%H:%M" : "%d %b %H:%M";
+    const std::string from = clock_text(at(d.t.front())), to = clock_text(at(d.t.back()));
+    return std::string("set xtics time\nset format x '") + fmt +
+           "' timedate\nset xlabel 'time: " + from + " .. " + to + " (as stamped in the data)'\n";
+  }
+  // "2024-09-01 21:55:00" of a clock value.
+  static std::string clock_text(double v) {
+    const auto secs = static_cast<std::time_t>(std::floor(v));
+    std::tm tm{};
+    gmtime_r(&secs, &tm);
+    char b[32];
+    std::strftime(b, sizeof b, "%Y-%m-%d %H:%M:%S", &tm);
+    return b;
+  }
+};
+
 const char* kFailFill = "#f4b6b6";  // the shading of the intervals where the model fails
 const char* kValFill = "#e6edf7";   // the held-out (validation) part
 
@@ -327,12 +367,13 @@ class Plot {
     s_ << "EOD\n";
     return name;
   }
-  // A time series t, y over the decimated indices.
-  std::string series(const std::vector<double>& t, const std::vector<double>& y, std::size_t from,
-                     std::size_t to, std::size_t buckets) {
+  // A time series t, y over the decimated indices, t on the axis given.
+  std::string series(const TimeAxis& axis, const std::vector<double>& t,
+                     const std::vector<double>& y, std::size_t from, std::size_t to,
+                     std::size_t buckets) {
     std::vector<std::string> rows;
     for (std::size_t k : minmax_decimate(y, from, to, buckets))
-      rows.push_back(dnum(t_at(t, k)) + " " + dnum(y[k]));
+      rows.push_back(axis.x(t_at(t, k)) + " " + dnum(y[k]));
     return block(rows);
   }
   std::ostringstream& out() { return s_; }
@@ -346,16 +387,17 @@ class Plot {
 // Shades the failing intervals (and the held-out part) of the current plot.
 void shade(Plot& p, const ReportContent& c) {
   const auto& t = c.data->t;
+  const TimeAxis axis(*c.data);
   int obj = 0;
   if (c.fit->estimation_end > 0 && c.fit->estimation_end < t.size())
-    p.out() << "set object " << ++obj << " rect from " << dnum(t[c.fit->estimation_end])
-            << ", graph 0 to " << dnum(t.back()) << ", graph 1 behind fc rgb '" << kValFill
+    p.out() << "set object " << ++obj << " rect from " << axis.x(t[c.fit->estimation_end])
+            << ", graph 0 to " << axis.x(t.back()) << ", graph 1 behind fc rgb '" << kValFill
             << "' fs solid 1.0 noborder\n";
   if (c.where != nullptr)
     for (const auto& iv : c.where->intervals) {
       const double t0 = t_at(t, iv.begin), t1 = t_at(t, iv.end > 0 ? iv.end - 1 : 0);
-      p.out() << "set object " << ++obj << " rect from " << dnum(t0) << ", graph 0 to "
-              << dnum(std::max(t1, t0 + 1e-9)) << ", graph 1 behind fc rgb '" << kFailFill
+      p.out() << "set object " << ++obj << " rect from " << axis.x(t0) << ", graph 0 to "
+              << axis.x(std::max(t1, t0 + 1e-3)) << ", graph 1 behind fc rgb '" << kFailFill
               << "' fs solid 1.0 noborder\n";
     }
 }
@@ -379,20 +421,22 @@ struct PlotJob {
 
 PlotJob trends_plot(const LoopData& d, std::size_t buckets) {
   Plot p(960, d.has_pv() ? 460 : 260);
+  const TimeAxis axis(d);
   const std::size_t n = d.size();
-  const std::string pv = d.has_pv() ? p.series(d.t, d.pv, 0, n, buckets) : "";
-  const std::string sp = d.has_pv() && d.has_sp() ? p.series(d.t, d.sp, 0, n, buckets) : "";
-  const std::string op = p.series(d.t, d.op, 0, n, buckets);
-  const std::string mv = d.has_mv() ? p.series(d.t, d.mv, 0, n, buckets) : "";
+  const std::string pv = d.has_pv() ? p.series(axis, d.t, d.pv, 0, n, buckets) : "";
+  const std::string sp = d.has_pv() && d.has_sp() ? p.series(axis, d.t, d.sp, 0, n, buckets) : "";
+  const std::string op = p.series(axis, d.t, d.op, 0, n, buckets);
+  const std::string mv = d.has_mv() ? p.series(axis, d.t, d.mv, 0, n, buckets) : "";
   auto& o = p.out();
   o << "set lmargin 10\nset rmargin 3\n";
   if (!pv.empty()) {
-    o << "set multiplot layout 2,1\nset format x ''\nset ylabel 'PV'\n";
+    o << "set multiplot layout 2,1\n"
+      << (axis.clock ? "set xtics time\n" : "") << "set format x ''\nset ylabel 'PV'\n";
     o << "plot " << pv << " with lines lw 1.2 lc rgb '#1f5fa8' title 'PV'";
     if (!sp.empty()) o << ", " << sp << " with lines lw 1.2 dt 2 lc rgb '#2e8b57' title 'SP'";
     o << "\n";
   }
-  o << "set format x '%g'\nset xlabel 't (s)'\nset ylabel 'OP (%)'\n";
+  o << axis.labels(d) << "set ylabel 'OP (%)'\n";
   o << "plot " << op << " with lines lw 1.2 lc rgb '#c05010' title 'OP'";
   if (!mv.empty())
     o << ", " << mv << " with lines lw 1.2 lc rgb '#7a3fa0' title 'valve position (MV)'";
@@ -412,10 +456,12 @@ PlotJob fit_plot(const ReportContent& c, std::size_t buckets) {
   const ModelFit& f = *c.fit;
   Plot p(960, 340);
   const std::size_t n = d.size();
-  const std::string pv = p.series(d.t, d.pv, 0, n, buckets);
-  const std::string sim = p.series(d.t, f.y_sim, f.first_sample, n, buckets);
+  const TimeAxis axis(d);
+  const std::string pv = p.series(axis, d.t, d.pv, 0, n, buckets);
+  const std::string sim = p.series(axis, d.t, f.y_sim, f.first_sample, n, buckets);
   shade(p, c);
-  p.out() << "set lmargin 10\nset rmargin 3\nset xlabel 't (s)'\nset ylabel 'PV'\n"
+  p.out() << "set lmargin 10\nset rmargin 3\n"
+          << axis.labels(d) << "set ylabel 'PV'\n"
           << "plot " << pv << " with lines lw 1.2 lc rgb '#555555' title 'measured PV', " << sim
           << " with lines lw 1.2 lc rgb '#d62728' title 'simulated PV (model)'" << shade_keys(c)
           << "\n";
@@ -433,10 +479,11 @@ PlotJob residual_plot(const ReportContent& c, std::size_t buckets) {
   Plot p(960, 300);
   std::vector<double> r(d.size(), std::nan(""));
   for (std::size_t k = f.first_sample; k < d.size(); ++k) r[k] = d.pv[k] - f.y_sim[k];
-  const std::string res = p.series(d.t, r, f.first_sample, d.size(), buckets);
+  const TimeAxis axis(d);
+  const std::string res = p.series(axis, d.t, r, f.first_sample, d.size(), buckets);
   shade(p, c);
   auto& o = p.out();
-  o << "set lmargin 10\nset rmargin 3\nset xlabel 't (s)'\nset ylabel 'PV - simulated PV'\n";
+  o << "set lmargin 10\nset rmargin 3\n" << axis.labels(d) << "set ylabel 'PV - simulated PV'\n";
   o << "plot " << res
     << " with lines lw 1 lc rgb '#333333' title 'residual', 0 with lines lc rgb "
        "'#999999' notitle";
@@ -829,6 +876,10 @@ void record_rows(std::ostringstream& o, const LoopData& d, const std::string& na
   row(o, "samples",
       std::to_string(d.size()) + " (t " + e(num(d.t.front(), 1)) + " .. " + e(num(d.t.back(), 1)) +
           " s" + e(span_note) + ")");
+  if (const TimeAxis axis(d); axis.clock)
+    row(o, "time stamps",
+        e(TimeAxis::clock_text(axis.at(d.t.front()))) + " .. " +
+            e(TimeAxis::clock_text(axis.at(d.t.back()))) + " (as stamped in the data)");
   row(o, "sample period Ts", e(num(d.sample_period(), 3)) + " s");
 }
 
@@ -902,10 +953,19 @@ void where_section(std::ostringstream& o, const ReportContent& c) {
   if (a.intervals.empty()) {
     o << "<p>No interval where the residual stands out beyond its white-noise level.</p>\n";
   } else {
-    o << "<table id=\"where-intervals\"><tr><th>t from (s)</th><th>t to (s)</th><th>samples</th>"
+    const TimeAxis axis(*c.data);
+    o << "<table id=\"where-intervals\"><tr>"
+      << (axis.clock ? "<th>from (time stamp)</th><th>to (time stamp)</th>" : "")
+      << "<th>t from (s)</th><th>t to (s)</th><th>samples</th>"
          "<th>residual RMS</th><th>share of the squared error</th></tr>\n";
     for (const auto& iv : a.intervals)
-      o << "<tr><td class=\"num\">" << e(num(t_at(t, iv.begin), 1)) << "</td><td class=\"num\">"
+      o << "<tr>"
+        << (axis.clock
+                ? "<td>" + e(TimeAxis::clock_text(axis.at(t_at(t, iv.begin)))) + "</td><td>" +
+                      e(TimeAxis::clock_text(axis.at(t_at(t, iv.end > 0 ? iv.end - 1 : 0)))) +
+                      "</td>"
+                : std::string())
+        << "<td class=\"num\">" << e(num(t_at(t, iv.begin), 1)) << "</td><td class=\"num\">"
         << e(num(t_at(t, iv.end > 0 ? iv.end - 1 : 0), 1)) << "</td><td class=\"num\">"
         << iv.end - iv.begin << "</td><td class=\"num\">" << e(num(iv.rms, 3))
         << "</td><td class=\"num\">" << e(num(100 * iv.share, 0)) << " %</td></tr>\n";
@@ -998,10 +1058,15 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
     const auto& f = s.findings.front();
     if (!f.intervals.empty() || !f.regions.empty()) {
       o << "<p>Where <code>" << e(f.effect) << "</code> shows:</p>\n<ul>\n";
-      for (const auto& iv : f.intervals)
-        o << "<li>t " << e(num(t_at(t, iv.begin), 1)) << " .. "
-          << e(num(t_at(t, iv.end > 0 ? iv.end - 1 : 0), 1)) << " s (" << e(num(100 * iv.share, 0))
-          << " % of the error)</li>\n";
+      const TimeAxis axis(*c.data);
+      for (const auto& iv : f.intervals) {
+        const double a0 = t_at(t, iv.begin), a1 = t_at(t, iv.end > 0 ? iv.end - 1 : 0);
+        o << "<li>t " << e(num(a0, 1)) << " .. " << e(num(a1, 1)) << " s";
+        if (axis.clock)
+          o << " (" << e(TimeAxis::clock_text(axis.at(a0))) << " .. "
+            << e(TimeAxis::clock_text(axis.at(a1))) << ")";
+        o << ", " << e(num(100 * iv.share, 0)) << " % of the error</li>\n";
+      }
       for (const auto& g : f.regions)
         o << "<li>" << e(g.label) << " carries " << e(num(100 * g.share, 0))
           << " % of the error</li>\n";

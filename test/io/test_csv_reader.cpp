@@ -73,6 +73,7 @@ TEST_CASE("plain CSV with the default column names") {
   CHECK(d.pv == std::vector<double>{2, 3.25, -0.005});
   CHECK_FALSE(d.has_sp());
   CHECK_FALSE(d.has_mv());
+  CHECK(std::isnan(d.clock_at_zero_s));  // seconds, no date-time stamps
 }
 
 TEST_CASE("sp and mv are read when present; names match case-insensitively") {
@@ -213,6 +214,8 @@ TEST_CASE("date-time stamps become seconds since the first sample") {
       "t,op,pv\n2024-02-28 23:59:59.5,1,2\n2024-02-29 00:00:00,2,3\n2024-02-29 00:00:00.5,3,4\n", o,
       &notes);
   CHECK(d.t == std::vector<double>{0, 0.5, 1.0});
+  // t = 0 on the data's clock: 2024-02-28 is day 19781 since 1970-01-01.
+  CHECK(d.clock_at_zero_s == doctest::Approx(19781.0 * 86400 + 86399.5).epsilon(1e-15));
   REQUIRE(notes.size() == 2);
   CHECK(notes[1] ==
         "t = 0 s is '2024-02-28 23:59:59.5' (line 2); time stamps are read as given, without time "
@@ -221,6 +224,7 @@ TEST_CASE("date-time stamps become seconds since the first sample") {
   o.time_format = "%m/%d/%Y %H:%M:%S";
   const LoopData e = parse("t,op,pv\n12/31/2023 23:59:50,1,2\n01/01/2024 00:00:00,2,3\n", o);
   CHECK(e.t == std::vector<double>{0, 10});
+  CHECK(e.clock_at_zero_s == doctest::Approx(19722.0 * 86400 + 86390).epsilon(1e-15));
   // 12-hour clock.
   o.time_format = "%m/%d/%Y %I:%M:%S %p";
   const LoopData f = parse(
@@ -271,7 +275,8 @@ TEST_CASE("a time stamp split over a date and a time column: --t DATE+TIME") {
     b.t_column = "Date+Clock";
     return b;
   }());
-  CHECK(std::string(err.what()).find("column 'Clock' (t): not found in the header row") != std::string::npos);
+  CHECK(std::string(err.what()).find("column 'Clock' (t): not found in the header row") !=
+        std::string::npos);
   o.t_column = "Date+";
   err = parse_error("Date;Time;op;pv\n31.12.2023;23:59:50;1;2\n31.12.2023;23:59:51;1;2\n", o);
   CHECK(std::string(err.what()).find("a split time stamp is DATE+TIME") != std::string::npos);

@@ -414,6 +414,14 @@ std::string error_of(const std::function<void()>& f) {
 }
 }  // namespace
 
+TEST_CASE("utc_seconds reads back what utc_timestamp writes, and nothing else") {
+  for (std::time_t t : {std::time_t{0}, std::time_t{951782400}, std::time_t{1790820000}})
+    CHECK(utc_seconds(utc_timestamp(t)) == static_cast<double>(t));
+  for (const char* bad : {"", "2026-10-01 02:00:00", "2026-10-01T02:00:00", "2026-13-01T02:00:00Z",
+                          "2026-10-01T24:00:00Z", "2026-10-01T02:00:00Zx", "2026-10-01T-1:00:00Z"})
+    CHECK_MESSAGE(std::isnan(utc_seconds(bad)), bad);
+}
+
 TEST_CASE("recordings from before table versions stay readable; newer tables are refused") {
   const std::string db = fresh_db("versions");
   // The recording tables as the first release wrote them (no schema_versions), with a run.
@@ -438,7 +446,14 @@ TEST_CASE("recordings from before table versions stay readable; newer tables are
             std::to_string(k % 7) + ", " + std::to_string(2 * k) + ", NULL, NULL, NULL, 0, 0, 0, " +
             "0, 0);";
   exec_sql(db, rows);
-  CHECK(read_recorded_loop(db, "FIC101").rows == 50);  // read before any migration
+  const RecordedLoop first = read_recorded_loop(db, "FIC101");  // read before any migration
+  CHECK(first.rows == 50);
+  CHECK(first.data.clock_at_zero_s ==
+        1790820000.0);  // t = 0 is the run's start, 2026-10-01T02:00:00Z
+  // An imported run started when it was imported: its ticks have no clock.
+  exec_sql(db, "UPDATE runs SET status = 'imported'");
+  CHECK(std::isnan(read_recorded_loop(db, "FIC101").data.clock_at_zero_s));
+  exec_sql(db, "UPDATE runs SET status = 'done'");
   {
     RecordingDb rec(db);  // a new recording into the old file
     const std::int64_t run = rec.begin_run("test");

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <string>
 
@@ -229,6 +230,37 @@ TEST_CASE("the page of a sticky loop: every plot, the shading, the triangle, all
   CHECK(h.find("<loop>") == std::string::npos);
   CHECK(h.find("a note with &lt;markup&gt;") != std::string::npos);
   CHECK(h.find("GNUPLOT") != std::string::npos);  // the footer names the plotting tool
+}
+
+TEST_CASE("time axes on the data's own clock when it has date-time stamps, else t in seconds") {
+  Fixture fx = shared_fixture("paper-ex1", "preisach:general", 1500);
+  REQUIRE(!fx.where.intervals.empty());
+  const std::string plain = html_report(fx.content()).html;
+  CHECK(figure(plain, "plot-trends").find("t (s)") != std::string::npos);
+  CHECK(plain.find("time stamps</th>") == std::string::npos);
+  // t = 0 at 2024-09-01 21:55:00 of the historian's stamps (day 19967 since 1970-01-01); the
+  // 1500 samples at Ts 0.5 s end at 22:07:29.5.
+  fx.d.clock_at_zero_s = 19967.0 * 86400 + 21 * 3600 + 55 * 60;
+  const HtmlReport r = html_report(fx.content());
+  const std::string& h = r.html;
+  CHECK(r.warnings.empty());
+  for (const char* id : {"plot-trends", "plot-fit", "plot-residual"}) {
+    const std::string f = figure(h, id);
+    CHECK_MESSAGE(f.find("time: 2024-09-01 21:55:00 .. 2024-09-01 22:07:29") != std::string::npos,
+                  id);
+    CHECK_MESSAGE(f.find(">22:00<") != std::string::npos, id);  // a tick label on the clock
+    CHECK_MESSAGE(f.find("t (s)") == std::string::npos, id);
+  }
+  // The failing intervals are still shaded, now on the clock's axis.
+  CHECK(count(figure(h, "plot-fit"), "rgb(244, 182, 182)") >= fx.where.intervals.size());
+  CHECK(h.find("<th>time stamps</th><td>2024-09-01 21:55:00 .. 2024-09-01 22:07:29") !=
+        std::string::npos);
+  const auto& iv = fx.where.intervals.front();
+  char from[16];
+  const int s0 = static_cast<int>(fx.d.t[iv.begin]);
+  std::snprintf(from, sizeof from, "%02d:%02d:%02d", 21 + (55 * 60 + s0) / 3600,
+                (55 * 60 + s0) / 60 % 60, s0 % 60);
+  CHECK(h.find(std::string("<td>2024-09-01 ") + from + "</td>") != std::string::npos);
 }
 
 TEST_CASE("a diagnosis's limit cycle shows as a row of the summary, escaped") {
