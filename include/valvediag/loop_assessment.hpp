@@ -29,6 +29,7 @@ struct LoopAssessment {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   std::string loop;    // name (site config) or file stem
   std::string source;  // file, or database and window
+  std::string tag;     // the loop's tag as the data names it (LoopData::tag); "" when it does not
   // stiction, deadband, other-nonlinearity, no-valve-problem, not-enough-data; "error" when the
   // analysis itself failed (then `error` says why).
   std::string verdict;

@@ -15,6 +15,9 @@ struct LoopData {
   std::vector<double> sp;  // set point (empty when not available)
   std::vector<double> mv;  // measured valve position x (empty when not available)
   std::string source;      // where the data came from (file name, scenario), for messages
+  // The loop's tag when the data names it: historian columns 2111FIC46005.MV and
+  // 2111FIC46005.PV name loop 2111FIC46005. Empty otherwise.
+  std::string tag;
   // The date and time of t = 0 as seconds since 1970-01-01 00:00:00 of the stamps as the data
   // gives them (a historian's local time read without zone, a recording's UTC); NaN when the
   // data has no date-time stamps. Plots and tables show t on this clock.

@@ -854,6 +854,14 @@ std::string number_problem(Num r, std::string_view cell, char decimal) {
   return p + ")";
 }
 
+// The tag OP's and PV's columns share before their last '.' (2111FIC46005.MV, 2111FIC46005.PV),
+// as historians name a loop's points; "" when they share none.
+std::string loop_tag(const std::string& op, const std::string& pv) {
+  const auto a = op.rfind('.'), b = pv.rfind('.');
+  if (a == std::string::npos || a == 0 || a != b || op.compare(0, a, pv, 0, b) != 0) return "";
+  return op.substr(0, a);
+}
+
 LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& file,
                      std::vector<std::string>* notes) {
   const char decimal = opt.decimal;
@@ -1274,6 +1282,7 @@ LoopData parse_lines(Lines& lines, const CsvOptions& opt, const std::string& fil
                         (resampled ? " resampled samples" : " rows") +
                         ": nothing to identify (is " + cop.flag + " the controller output?)",
                     cop.role);
+  d.tag = loop_tag(cop.name, cpv.name);
   return d;
 }
 

@@ -73,6 +73,7 @@ json assessment_json(const LoopAssessment& a) {
   json j;
   j["loop"] = a.loop;
   j["source"] = a.source;
+  j["tag"] = a.tag;
   j["verdict"] = a.verdict;
   j["reason"] = a.reason;
   j["severity"] = a.severity;
@@ -121,6 +122,7 @@ LoopAssessment assessment_from_json(const json& j) {
   a.loop = text_of(j, "loop");
   if (a.loop.empty()) throw std::runtime_error("a loop's result has no 'loop' name");
   a.source = text_of(j, "source");
+  a.tag = text_of(j, "tag");  // "" in older results
   a.verdict = text_of(j, "verdict");
   a.reason = text_of(j, "reason");
   a.severity = number_of(j, "severity");
@@ -310,10 +312,14 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
     const auto& a = loops[i];
     const std::string link = i < report_links.size() ? report_links[i] : "";
     o << "<tr class=\"" << html_escape(a.verdict) << "\"><td>" << i + 1 << "</td><td class=\"l\">";
+    // The tag the data names, when it does, with the file's name under it.
+    const bool tagged = !a.tag.empty() && a.tag != a.loop;
+    const std::string name = html_escape(tagged ? a.tag : a.loop);
     if (!link.empty())
-      o << "<a href=\"" << html_escape(link) << "\">" << html_escape(a.loop) << "</a>";
+      o << "<a href=\"" << html_escape(link) << "\">" << name << "</a>";
     else
-      o << html_escape(a.loop);
+      o << name;
+    if (tagged) o << "<br><small>" << html_escape(a.loop) << "</small>";
     o << "</td><td class=\"l\">" << html_escape(a.verdict) << "</td><td>"
       << fmt(a.stiction_percent, 2) << stiction_range_html(a) << "</td><td>"
       << fmt(a.slip_jump_percent, 2) << "</td>"

@@ -46,6 +46,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   LoopAssessment a;
   a.loop = name;
   a.source = d.source;
+  a.tag = d.tag;
   a.health = v.health;
   a.verdict = v.verdict;
   a.reason = v.reason;

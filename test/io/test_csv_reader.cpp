@@ -142,6 +142,17 @@ TEST_CASE("columns remapped by name, by number and by wildcard") {
   const LoopData f = parse(text, w);
   CHECK(f.op == d.op);
   CHECK(f.pv == d.pv);
+  CHECK(f.tag.empty());  // OUT1 and TEMP name no loop
+}
+
+TEST_CASE("a historian's point names give the loop's tag") {
+  CsvOptions o;
+  o.op_column = "*.MV";
+  o.pv_column = "*.PV";
+  CHECK(parse("t,2111FIC46005.MV,2111FIC46005.PV\n0,1,2\n1,2,3\n", o).tag == "2111FIC46005");
+  // Points of two loops, or no loop part: no tag.
+  CHECK(parse("t,FIC1.MV,FIC2.PV\n0,1,2\n1,2,3\n", o).tag.empty());
+  CHECK(parse("t,.MV,.PV\n0,1,2\n1,2,3\n", o).tag.empty());
 }
 
 TEST_CASE("semicolon, tab, space and auto-detected delimiters") {

@@ -265,6 +265,16 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   bounded.stiction_hi_open = false;
   CHECK(sweep_html({}, {bounded}, {}).find("(2.10-3.25)") != std::string::npos);
   CHECK(sweep_csv({bounded}).find(",2.1000,3.2500,0\n") != std::string::npos);
+  // A loop whose data names its tag: the page shows the tag, the file's name under it.
+  LoopAssessment tagged = a;
+  tagged.loop = "stic_2111FIC46005_0902";
+  tagged.tag = "2111FIC46005";
+  CHECK(assessment_from_json(assessment_json(tagged)).tag == "2111FIC46005");
+  CHECK(o.tag.empty());  // results written before tags
+  CHECK(sweep_html({}, {tagged}, {})
+            .find("<td class=\"l\">2111FIC46005<br><small>stic_2111FIC46005_0902</small></td>") !=
+        std::string::npos);
+  CHECK(sweep_html({}, {a}, {}).find("<td class=\"l\">FIC101</td>") != std::string::npos);
   CHECK(b.ladder[1].validation_fitness_percent == 88.0);
   CHECK(b.health.oscillating);
   CHECK(b.health.period_s == 120);
