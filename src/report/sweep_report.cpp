@@ -274,6 +274,65 @@ std::string sweep_csv(const std::vector<LoopAssessment>& loops) {
   return o.str();
 }
 
+// The loops in rank order as horizontal bars of their severity (the ranking key, 0-10),
+// coloured by verdict, named by tag: which valves to look at first, at a glance. Inline SVG,
+// so the page needs nothing else to show it.
+std::string severity_chart(const std::vector<LoopAssessment>& loops) {
+  constexpr std::size_t kMaxBars = 40;
+  constexpr int kLabel = 230, kBars = 520, kRow = 17, kTop = 22, kMax = 10;
+  const std::size_t n = std::min(loops.size(), kMaxBars);
+  if (n == 0) return "";
+  const int height = kTop + static_cast<int>(n) * kRow + 6;
+  const int width = kLabel + kBars + 190;
+  auto colour = [](const std::string& v) {
+    return v == "stiction"             ? "#d9534f"
+           : v == "deadband"           ? "#e8923a"
+           : v == "other-nonlinearity" ? "#d4c140"
+           : v == "no-valve-problem"   ? "#7fa7d9"
+                                       : "#bbbbbb";
+  };
+  std::ostringstream o;
+  o << "<figure id=\"severity-chart\"><svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << width
+    << "\" height=\"" << height << "\" viewBox=\"0 0 " << width << " " << height
+    << "\" font-family=\"sans-serif\" font-size=\"12\" role=\"img\" "
+       "aria-label=\"severity of each loop, worst first\">\n";
+  for (int k = 0; k <= kMax; k += 2) {
+    const int x = kLabel + kBars * k / kMax;
+    o << "<line x1=\"" << x << "\" y1=\"" << kTop - 4 << "\" x2=\"" << x << "\" y2=\"" << height - 4
+      << "\" stroke=\"#dddddd\"/><text x=\"" << x << "\" y=\"" << kTop - 8
+      << "\" text-anchor=\"middle\" fill=\"#555555\">" << k << "</text>\n";
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    const LoopAssessment& a = loops[i];
+    const int y = kTop + static_cast<int>(i) * kRow;
+    std::string name = a.tag.empty() ? a.loop : a.tag;
+    if (name.size() > 34) {
+      name.resize(33);
+      name.push_back('~');
+    }
+    o << "<text x=\"" << kLabel - 6 << "\" y=\"" << y + 12 << "\" text-anchor=\"end\">"
+      << html_escape(name) << "</text>";
+    const double s = std::clamp(a.severity, 0.0, static_cast<double>(kMax));
+    const int w = static_cast<int>(std::lround(kBars * s / kMax));
+    if (a.severity >= 0)
+      o << "<rect x=\"" << kLabel << "\" y=\"" << y + 2 << "\" width=\"" << std::max(w, 1)
+        << "\" height=\"" << kRow - 4 << "\" fill=\"" << colour(a.verdict) << "\"/>";
+    std::string what = a.verdict;
+    if (std::isfinite(a.stiction_percent))
+      what.append(" ").append(fmt(a.stiction_percent, 2)).append(" %");
+    o << "<text x=\"" << kLabel + std::max(w, 0) + 5 << "\" y=\"" << y + 12
+      << "\" fill=\"#333333\">" << html_escape(what) << "</text>\n";
+  }
+  o << "</svg><figcaption>Severity, the ranking key: the verdict (stiction 6, deadband 5, other "
+       "nonlinearity 3, no valve problem 1, not enough data 0), 1 more when the loop oscillates, "
+       "and half the stiction band in % of travel (at most 3). The label gives the verdict and "
+       "the band.";
+  if (loops.size() > n)
+    o << " The " << n << " worst of " << loops.size() << " loops; the table lists all.";
+  o << "</figcaption></figure>\n";
+  return o.str();
+}
+
 std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>& loops,
                        const std::vector<std::string>& report_links) {
   std::ostringstream o;
@@ -285,6 +344,8 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
        "tr.other-nonlinearity{background:#ffe}tr.error,tr.not-enough-data{color:#777}"
        "table.counts{margin-bottom:1em;max-width:60em}table.counts td.l{white-space:normal}"
        "div.wide{overflow-x:auto;max-width:100%}div.wide table{font-size:.9em}"
+       "td.v,table.counts td:first-child{white-space:nowrap}small{word-break:break-all;color:#555}"
+       "figure{margin:0 0 1em 0}figcaption{font-size:.85em;color:#555;max-width:60em}"
        "</style></head><body>\n";
   o << "<h1>Valve diagnostic sweep</h1>\n<p>" << html_escape(info.source) << "; started "
     << html_escape(info.started_utc) << ", finished " << html_escape(info.finished_utc);
@@ -301,6 +362,7 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
       o << "<tr class=\"" << v << "\"><td class=\"l\">" << v << "</td><td>" << counts[v]
         << "</td><td class=\"l\">" << html_escape(verdict_advice(v)) << "</td></tr>\n";
   o << "</table>\n";
+  o << severity_chart(loops);
   // Wide: it scrolls inside its box rather than widening the page.
   o << "<div class=\"wide\"><table><tr><th>rank</th><th class=\"l\">loop</th><th "
        "class=\"l\">verdict</th>"
@@ -320,7 +382,7 @@ std::string sweep_html(const SweepInfo& info, const std::vector<LoopAssessment>&
     else
       o << name;
     if (tagged) o << "<br><small>" << html_escape(a.loop) << "</small>";
-    o << "</td><td class=\"l\">" << html_escape(a.verdict) << "</td><td>"
+    o << "</td><td class=\"l v\">" << html_escape(a.verdict) << "</td><td>"
       << fmt(a.stiction_percent, 2) << stiction_range_html(a) << "</td><td>"
       << fmt(a.slip_jump_percent, 2) << "</td>"
       << "<td class=\"l\">" << html_escape(a.model) << "</td><td>" << fmt(a.fitness_percent)

@@ -343,6 +343,21 @@ TEST_CASE("results survive their JSON round trip; rank puts the worst valve firs
   CHECK(html.find("<td class=\"l\">deadband</td>") == std::string::npos);
   CHECK(html.find(verdict_advice("stiction")) != std::string::npos);
   CHECK(html.find("<div class=\"wide\">") != std::string::npos);
+  // The severity chart: a bar per loop in rank order, as long as its severity on a 0-10 scale of
+  // 520 px (FIC101: 6 + 1 oscillating + 2.5 / 2 = 8.25, 429 px), labelled with verdict and band;
+  // the loop whose analysis failed has no bar.
+  const auto chart_at = html.find("<figure id=\"severity-chart\">");
+  REQUIRE(chart_at != std::string::npos);
+  const std::string chart = html.substr(chart_at, html.find("</figure>", chart_at) - chart_at);
+  CHECK(v[0].severity == doctest::Approx(8.25));
+  std::size_t bars = 0;
+  for (auto at = chart.find("<rect"); at != std::string::npos; at = chart.find("<rect", at + 1))
+    ++bars;
+  CHECK(bars == 3);
+  CHECK(chart.find("width=\"429\" height=\"13\" fill=\"#d9534f\"/><text x=\"664\" y=\"34\" "
+                   "fill=\"#333333\">stiction 2.50 %</text>") != std::string::npos);
+  CHECK(chart.find(">FIC101</text>") < chart.find(">FIC100</text>"));
+  CHECK(chart.find(">AIC9</text>") != std::string::npos);
   for (const char* v : {"stiction", "deadband", "other-nonlinearity", "no-valve-problem",
                         "not-enough-data", "error"})
     CHECK_MESSAGE(!verdict_advice(v).empty(), v);
