@@ -263,19 +263,25 @@ TEST_CASE_FIXTURE(SimRig, "recorded values equal the simulated loop's samples, t
   const RecorderStatus s = rec.run(stop);
   CHECK(s.loops[0].rows == 20);
   const LoopData sim =
-      run_scenario(scenario_by_name("paper-ex1"), 1, static_cast<std::size_t>(k0) + 20);
+      run_scenario(scenario_by_name("paper-ex1"), 1, static_cast<std::size_t>(k0) + 21);
   const RecordedLoop r = read_recorded_loop(db, "FIC101", std::nullopt, std::nullopt, 0, true);
-  std::size_t compared = 0;
+  // The registers (float32) of simulation step k, as the PLC served them.
+  const auto served = [&](std::size_t i, std::size_t k) {
+    const auto same = [](double a, double b) { return std::fabs(a - b) <= 1e-5 * std::fabs(b); };
+    return same(r.data.op[i], sim.op[k]) && same(r.data.pv[i], sim.pv[k]) &&
+           same(r.data.mv[i], sim.mv[k]);
+  };
+  std::size_t on_tick = 0;
   for (std::size_t i = 0; i < r.data.size(); ++i) {
     const auto k =
         static_cast<std::size_t>(k0) + static_cast<std::size_t>(std::lround(r.data.t[i] / kPeriod));
     INFO("tick ", i, " step ", k);
-    CHECK(std::fabs(r.data.op[i] - sim.op[k]) <= 1e-5 * std::fabs(sim.op[k]));
-    CHECK(std::fabs(r.data.pv[i] - sim.pv[k]) <= 1e-5 * std::fabs(sim.pv[k]));
-    CHECK(std::fabs(r.data.mv[i] - sim.mv[k]) <= 1e-5 * std::fabs(sim.mv[k]));
-    ++compared;
+    // A read due mid-step that a loaded machine delays by half a period finds the next step:
+    // a real value, one tick late. Any other value is wrong.
+    CHECK((served(i, k) || served(i, k + 1)));
+    if (served(i, k)) ++on_tick;
   }
-  CHECK(compared >= 15);  // all 20 unless the machine stalled for 25 ms
+  CHECK(on_tick >= 15);  // all 20 unless the machine stalled for 25 ms
   CHECK(no_writes(plc));
 }
 
