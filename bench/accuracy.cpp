@@ -19,9 +19,9 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/diagnosis_benchmark.hpp"
-#include "valvediag/parallel_for.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/core/parallel_for.hpp"
+#include "valvediag/diagnose/diagnosis_benchmark.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 using namespace valvediag;
 

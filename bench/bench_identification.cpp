@@ -15,9 +15,9 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/identification.hpp"
-#include "valvediag/nnls.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/core/identification.hpp"
+#include "valvediag/core/nnls.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;

@@ -8,9 +8,9 @@
 #include <filesystem>
 #include <string>
 
-#include "valvediag/bus_factory.hpp"
-#include "valvediag/recorder.hpp"
-#include "valvediag/sim_plc.hpp"
+#include "valvediag/drivers/bus_factory.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
+#include "valvediag/recorder/recorder.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;

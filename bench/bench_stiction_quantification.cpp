@@ -13,9 +13,9 @@
 #include <thread>
 #include <vector>
 
-#include "valvediag/identification.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/stiction_quantification.hpp"
+#include "valvediag/core/identification.hpp"
+#include "valvediag/core/stiction_quantification.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;

@@ -13,8 +13,8 @@
 #include <cstdlib>
 #include <vector>
 
-#include "valvediag/effect_estimators.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/model/effect_estimators.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;

@@ -1,7 +1,7 @@
-#include "valvediag/bus_factory.hpp"
+#include "valvediag/drivers/bus_factory.hpp"
 
-#include "valvediag/can_bus.hpp"
-#include "valvediag/modbus_bus.hpp"
+#include "valvediag/drivers/can_bus.hpp"
+#include "valvediag/drivers/modbus_bus.hpp"
 
 namespace valvediag {
 

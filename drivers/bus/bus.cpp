@@ -1,4 +1,4 @@
-#include "valvediag/bus.hpp"
+#include "valvediag/drivers/bus.hpp"
 
 namespace valvediag {
 

@@ -1,6 +1,6 @@
 // DBC reader: BO_ and SG_ lines only (the rest of a DBC file describes nodes, comments and
 // attributes the recorder does not need).
-#include "valvediag/dbc.hpp"
+#include "valvediag/drivers/dbc.hpp"
 
 #include <cctype>
 #include <charconv>

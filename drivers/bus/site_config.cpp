@@ -1,7 +1,7 @@
 // Site configuration reader (toml++). Each table is read through a Table helper that knows its
 // name and line, rejects unknown keys (a typo must not silently become a default) and turns every
 // problem into a SiteConfigError at the right line.
-#include "valvediag/site_config.hpp"
+#include "valvediag/drivers/site_config.hpp"
 
 #include <toml++/toml.h>
 
@@ -12,8 +12,8 @@
 #include <set>
 #include <sstream>
 
-#include "valvediag/dbc.hpp"
-#include "valvediag/file_position.hpp"
+#include "valvediag/drivers/dbc.hpp"
+#include "valvediag/io/file_position.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/value_codec.hpp"
+#include "valvediag/drivers/value_codec.hpp"
 
 #include <bit>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "valvediag/can_bus.hpp"
+#include "valvediag/drivers/can_bus.hpp"
 
 #include <linux/can.h>
 #include <linux/can/raw.h>

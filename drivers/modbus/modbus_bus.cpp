@@ -1,4 +1,4 @@
-#include "valvediag/modbus_bus.hpp"
+#include "valvediag/drivers/modbus_bus.hpp"
 
 #include <modbus/modbus.h>
 #include <poll.h>

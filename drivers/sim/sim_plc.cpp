@@ -2,7 +2,7 @@
 // values into the register map and their CAN frames to the frame sockets (accepting CAN clients
 // between steps); one server thread answers Modbus TCP requests from that map (under one mutex,
 // so the values of one request always come from the same step).
-#include "valvediag/sim_plc.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
 
 #include <arpa/inet.h>
 #include <linux/can.h>
@@ -23,7 +23,7 @@
 #include <stdexcept>
 #include <thread>
 
-#include "valvediag/scenarios.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 namespace valvediag {
 

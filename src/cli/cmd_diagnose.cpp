@@ -6,11 +6,11 @@
 #include "data_options.hpp"
 #include "fit_runner.hpp"
 #include "history_options.hpp"
-#include "valvediag/atomic_file.hpp"
-#include "valvediag/data_checks.hpp"
-#include "valvediag/diagnosis_report.hpp"
-#include "valvediag/loop_verdict.hpp"
-#include "valvediag/sweep_report.hpp"
+#include "valvediag/io/atomic_file.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/report/diagnosis_report.hpp"
+#include "valvediag/report/sweep_report.hpp"
+#include "valvediag/sweep/loop_verdict.hpp"
 #include "verdict_output.hpp"
 
 namespace valvediag::cli {

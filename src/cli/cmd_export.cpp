@@ -2,9 +2,9 @@
 
 #include "commands.hpp"
 #include "data_options.hpp"
-#include "valvediag/csv_writer.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/recorder.hpp"
+#include "valvediag/io/csv_writer.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/recorder/recorder.hpp"
 
 namespace valvediag::cli {
 

@@ -9,11 +9,11 @@
 
 #include "commands.hpp"
 #include "isolated_mat_reader.hpp"
-#include "valvediag/csv_writer.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/mat_reader.hpp"
-#include "valvediag/recorder.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/io/csv_writer.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/io/mat_reader.hpp"
+#include "valvediag/recorder/recorder.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag::cli {
 namespace {

@@ -7,8 +7,8 @@
 
 #include "commands.hpp"
 #include "stop_signal.hpp"
-#include "valvediag/bus_factory.hpp"
-#include "valvediag/recorder.hpp"
+#include "valvediag/drivers/bus_factory.hpp"
+#include "valvediag/recorder/recorder.hpp"
 
 namespace valvediag::cli {
 

@@ -10,11 +10,11 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "history_options.hpp"
-#include "valvediag/atomic_file.hpp"
-#include "valvediag/data_checks.hpp"
-#include "valvediag/html_report.hpp"
-#include "valvediag/loop_verdict.hpp"
-#include "valvediag/model_history.hpp"
+#include "valvediag/io/atomic_file.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/report/html_report.hpp"
+#include "valvediag/report/model_history.hpp"
+#include "valvediag/sweep/loop_verdict.hpp"
 #include "verdict_output.hpp"
 
 namespace valvediag::cli {

@@ -4,7 +4,7 @@
 
 #include "commands.hpp"
 #include "stop_signal.hpp"
-#include "valvediag/sim_plc.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
 
 namespace valvediag::cli {
 

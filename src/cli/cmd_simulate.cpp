@@ -3,10 +3,10 @@
 
 #include "commands.hpp"
 #include "fit_runner.hpp"
-#include "valvediag/atomic_file.hpp"
-#include "valvediag/csv_writer.hpp"
-#include "valvediag/random_loop.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/io/atomic_file.hpp"
+#include "valvediag/io/csv_writer.hpp"
+#include "valvediag/sim/random_loop.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 namespace valvediag::cli {
 

@@ -6,8 +6,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "valvediag/html_report.hpp"
-#include "valvediag/recorder.hpp"
+#include "valvediag/recorder/recorder.hpp"
+#include "valvediag/report/html_report.hpp"
 
 namespace valvediag::cli {
 

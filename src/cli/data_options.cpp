@@ -7,9 +7,9 @@
 
 #include "commands.hpp"
 #include "isolated_mat_reader.hpp"
-#include "valvediag/loop_health.hpp"
-#include "valvediag/loop_verdict.hpp"
-#include "valvediag/mat_reader.hpp"
+#include "valvediag/io/mat_reader.hpp"
+#include "valvediag/sweep/loop_health.hpp"
+#include "valvediag/sweep/loop_verdict.hpp"
 
 namespace valvediag::cli {
 

@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/loop_data.hpp"
-#include "valvediag/op_range.hpp"
+#include "valvediag/core/op_range.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/io/loop_data.hpp"
 
 namespace valvediag::cli {
 

@@ -3,10 +3,10 @@
 #include <fstream>
 #include <stdexcept>
 
-#include "valvediag/csv_writer.hpp"
-#include "valvediag/data_checks.hpp"
-#include "valvediag/fit_report.hpp"
-#include "valvediag/stiction_quantification.hpp"
+#include "valvediag/core/stiction_quantification.hpp"
+#include "valvediag/io/csv_writer.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/report/fit_report.hpp"
 
 namespace valvediag::cli {
 

@@ -4,9 +4,9 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "valvediag/identification.hpp"
-#include "valvediag/loop_data.hpp"
-#include "valvediag/op_range.hpp"
+#include "valvediag/core/identification.hpp"
+#include "valvediag/core/op_range.hpp"
+#include "valvediag/io/loop_data.hpp"
 
 namespace valvediag::cli {
 

@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "data_options.hpp"
-#include "valvediag/model_history.hpp"
-#include "valvediag/recording_history.hpp"
+#include "valvediag/recorder/recording_history.hpp"
+#include "valvediag/report/model_history.hpp"
 
 namespace valvediag::cli {
 

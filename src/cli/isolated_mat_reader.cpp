@@ -9,7 +9,7 @@
 #include <utility>
 
 #include "isolated_jobs.hpp"
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/data_error.hpp"
 
 namespace valvediag::cli {
 

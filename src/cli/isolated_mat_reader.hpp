@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/mat_reader.hpp"
+#include "valvediag/io/mat_reader.hpp"
 
 namespace valvediag::cli {
 

@@ -7,10 +7,10 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/model_spec.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/site_config.hpp"
+#include "valvediag/drivers/site_config.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/model/model_spec.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 namespace {
 

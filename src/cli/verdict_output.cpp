@@ -2,8 +2,8 @@
 
 #include <cmath>
 
-#include "valvediag/sweep_report.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/report/sweep_report.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag::cli {
 

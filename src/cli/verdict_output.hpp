@@ -5,7 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "valvediag/loop_verdict.hpp"
+#include "valvediag/sweep/loop_verdict.hpp"
 
 namespace valvediag::cli {
 

@@ -1,4 +1,4 @@
-#include "valvediag/autocorrelation.hpp"
+#include "valvediag/core/autocorrelation.hpp"
 
 #include <algorithm>
 #include <cmath>

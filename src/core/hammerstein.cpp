@@ -1,4 +1,4 @@
-#include "valvediag/hammerstein.hpp"
+#include "valvediag/core/hammerstein.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>

@@ -1,4 +1,4 @@
-#include "valvediag/identifiability.hpp"
+#include "valvediag/core/identifiability.hpp"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -6,7 +6,7 @@
 #include <set>
 #include <sstream>
 
-#include "valvediag/relay_design.hpp"
+#include "valvediag/core/relay_design.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/identification.hpp"
+#include "valvediag/core/identification.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -7,8 +7,8 @@
 #include <mutex>
 #include <stdexcept>
 
-#include "valvediag/parallel_for.hpp"
-#include "valvediag/relay_design.hpp"
+#include "valvediag/core/parallel_for.hpp"
+#include "valvediag/core/relay_design.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/nnls.hpp"
+#include "valvediag/core/nnls.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "valvediag/preisach.hpp"
+#include "valvediag/core/preisach.hpp"
 
 #include <algorithm>
 #include <cmath>

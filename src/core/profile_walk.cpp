@@ -1,4 +1,4 @@
-#include "valvediag/profile_walk.hpp"
+#include "valvediag/core/profile_walk.hpp"
 
 #include <algorithm>
 #include <utility>

@@ -1,4 +1,4 @@
-#include "valvediag/relay_design.hpp"
+#include "valvediag/core/relay_design.hpp"
 
 #include <algorithm>
 #include <stdexcept>

@@ -1,4 +1,4 @@
-#include "valvediag/stiction_quantification.hpp"
+#include "valvediag/core/stiction_quantification.hpp"
 
 #include <nlopt.h>
 
@@ -16,9 +16,9 @@
 #include <unordered_map>
 #include <utility>
 
-#include "valvediag/autocorrelation.hpp"
-#include "valvediag/parallel_for.hpp"
-#include "valvediag/profile_walk.hpp"
+#include "valvediag/core/autocorrelation.hpp"
+#include "valvediag/core/parallel_for.hpp"
+#include "valvediag/core/profile_walk.hpp"
 
 namespace valvediag {
 namespace {

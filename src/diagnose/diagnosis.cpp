@@ -1,4 +1,4 @@
-#include "valvediag/diagnosis.hpp"
+#include "valvediag/diagnose/diagnosis.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -9,9 +9,9 @@
 #include <stdexcept>
 #include <utility>
 
-#include "valvediag/autocorrelation.hpp"
-#include "valvediag/pairwise_ranking.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/core/autocorrelation.hpp"
+#include "valvediag/diagnose/pairwise_ranking.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

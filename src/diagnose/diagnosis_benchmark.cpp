@@ -1,4 +1,4 @@
-#include "valvediag/diagnosis_benchmark.hpp"
+#include "valvediag/diagnose/diagnosis_benchmark.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -6,7 +6,7 @@
 #include <map>
 #include <stdexcept>
 
-#include "valvediag/text_stats.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/limit_cycle.hpp"
+#include "valvediag/diagnose/limit_cycle.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,8 +6,8 @@
 #include <cstdio>
 #include <numeric>
 
-#include "valvediag/autocorrelation.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/core/autocorrelation.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

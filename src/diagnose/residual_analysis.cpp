@@ -1,4 +1,4 @@
-#include "valvediag/residual_analysis.hpp"
+#include "valvediag/diagnose/residual_analysis.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <numeric>
 #include <stdexcept>
 
-#include "valvediag/text_stats.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

@@ -1,5 +1,5 @@
 // The valve-travel test: friction read from OP -> MV (valve_travel.hpp).
-#include "valvediag/valve_travel.hpp"
+#include "valvediag/diagnose/valve_travel.hpp"
 
 #include <nlopt.h>
 
@@ -9,8 +9,8 @@
 #include <cmath>
 #include <cstdio>
 
-#include "valvediag/hammerstein.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/core/hammerstein.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 namespace {

@@ -1,5 +1,5 @@
 // The verdict a plant engineer wants first, from a diagnosis.
-#include "valvediag/verdict.hpp"
+#include "valvediag/diagnose/verdict.hpp"
 
 namespace valvediag {
 

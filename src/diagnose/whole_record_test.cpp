@@ -1,4 +1,4 @@
-#include "valvediag/whole_record_test.hpp"
+#include "valvediag/diagnose/whole_record_test.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "valvediag/text_stats.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/atomic_file.hpp"
+#include "valvediag/io/atomic_file.hpp"
 
 #include <fcntl.h>
 #include <unistd.h>

@@ -1,4 +1,4 @@
-#include "valvediag/csv_reader.hpp"
+#include "valvediag/io/csv_reader.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -15,9 +15,9 @@
 #include <utility>
 
 #include "time_parse.hpp"
-#include "valvediag/data_checks.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 namespace {

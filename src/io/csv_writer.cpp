@@ -1,4 +1,4 @@
-#include "valvediag/csv_writer.hpp"
+#include "valvediag/io/csv_writer.hpp"
 
 #include <cerrno>
 #include <charconv>
@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <system_error>
 
-#include "valvediag/atomic_file.hpp"
+#include "valvediag/io/atomic_file.hpp"
 
 namespace valvediag {
 namespace {

@@ -1,11 +1,11 @@
-#include "valvediag/data_checks.hpp"
+#include "valvediag/io/data_checks.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <string>
 
-#include "valvediag/data_error.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 namespace {

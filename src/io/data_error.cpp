@@ -1,4 +1,4 @@
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/data_error.hpp"
 
 #include <utility>
 

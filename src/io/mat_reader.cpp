@@ -1,7 +1,7 @@
 // MAT-file loops through libmatio. The file's header and top-level element tags are checked here
 // before libmatio reads anything, so a truncated or foreign file gets a clear DataError instead of
 // whatever libmatio would make of it; libmatio's log messages are captured, never printed.
-#include "valvediag/mat_reader.hpp"
+#include "valvediag/io/mat_reader.hpp"
 
 #include <matio.h>
 
@@ -17,9 +17,9 @@
 #include <mutex>
 #include <string_view>
 
-#include "valvediag/data_checks.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 namespace {

@@ -8,8 +8,8 @@
 #include <stdexcept>
 #include <tuple>
 
-#include "valvediag/effect_estimators.hpp"
-#include "valvediag/hammerstein.hpp"
+#include "valvediag/core/hammerstein.hpp"
+#include "valvediag/model/effect_estimators.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/model_fit.hpp"
+#include "valvediag/model/model_fit.hpp"
 
 #include <nlopt.h>
 
@@ -11,10 +11,10 @@
 #include <optional>
 #include <stdexcept>
 
-#include "valvediag/autocorrelation.hpp"
-#include "valvediag/identification.hpp"
-#include "valvediag/parallel_for.hpp"
-#include "valvediag/profile_walk.hpp"
+#include "valvediag/core/autocorrelation.hpp"
+#include "valvediag/core/identification.hpp"
+#include "valvediag/core/parallel_for.hpp"
+#include "valvediag/core/profile_walk.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/model_spec.hpp"
+#include "valvediag/model/model_spec.hpp"
 
 #include <algorithm>
 #include <iterator>

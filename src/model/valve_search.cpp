@@ -2,7 +2,7 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "valvediag/effect_estimators.hpp"
+#include "valvediag/model/effect_estimators.hpp"
 
 namespace valvediag {
 namespace {

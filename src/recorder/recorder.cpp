@@ -1,6 +1,6 @@
 // Polling threads (one per bus: a bus answers one request at a time) produce rows into a queue;
 // the calling thread commits the queue every commit interval and reports status.
-#include "valvediag/recorder.hpp"
+#include "valvediag/recorder/recorder.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -10,9 +10,9 @@
 #include <optional>
 #include <thread>
 
-#include "valvediag/recorder_lock.hpp"
-#include "valvediag/text_stats.hpp"
-#include "valvediag/utc_time.hpp"
+#include "valvediag/recorder/recorder_lock.hpp"
+#include "valvediag/util/text_stats.hpp"
+#include "valvediag/util/utc_time.hpp"
 
 namespace valvediag {
 

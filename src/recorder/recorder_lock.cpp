@@ -1,4 +1,4 @@
-#include "valvediag/recorder_lock.hpp"
+#include "valvediag/recorder/recorder_lock.hpp"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -12,7 +12,7 @@
 #include <sstream>
 #include <thread>
 
-#include "valvediag/utc_time.hpp"
+#include "valvediag/util/utc_time.hpp"
 
 namespace valvediag {
 

@@ -11,12 +11,12 @@
 #include <filesystem>
 #include <type_traits>
 
-#include "valvediag/data_checks.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/recorder.hpp"
-#include "valvediag/recorder_lock.hpp"
-#include "valvediag/schema_versions.hpp"
-#include "valvediag/utc_time.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/recorder/recorder.hpp"
+#include "valvediag/recorder/recorder_lock.hpp"
+#include "valvediag/recorder/schema_versions.hpp"
+#include "valvediag/util/utc_time.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/recording_history.hpp"
+#include "valvediag/recorder/recording_history.hpp"
 
 #include <sqlite3.h>
 
@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include "valvediag/recorder.hpp"
+#include "valvediag/recorder/recorder.hpp"
 
 namespace valvediag {
 

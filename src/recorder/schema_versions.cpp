@@ -1,4 +1,4 @@
-#include "valvediag/schema_versions.hpp"
+#include "valvediag/recorder/schema_versions.hpp"
 
 #include <sqlite3.h>
 

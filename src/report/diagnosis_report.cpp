@@ -1,4 +1,4 @@
-#include "valvediag/diagnosis_report.hpp"
+#include "valvediag/report/diagnosis_report.hpp"
 
 #include <cmath>
 #include <cstdio>

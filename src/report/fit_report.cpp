@@ -1,4 +1,4 @@
-#include "valvediag/fit_report.hpp"
+#include "valvediag/report/fit_report.hpp"
 
 #include <algorithm>
 #include <cmath>

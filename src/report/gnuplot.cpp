@@ -1,4 +1,4 @@
-#include "valvediag/gnuplot.hpp"
+#include "valvediag/report/gnuplot.hpp"
 
 #include <fcntl.h>
 #include <poll.h>

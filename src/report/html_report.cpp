@@ -1,4 +1,4 @@
-#include "valvediag/html_report.hpp"
+#include "valvediag/report/html_report.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -14,9 +14,9 @@
 #include <stdexcept>
 
 #include "number_format.hpp"
-#include "valvediag/autocorrelation.hpp"
-#include "valvediag/fit_report.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/core/autocorrelation.hpp"
+#include "valvediag/report/fit_report.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/model_history.hpp"
+#include "valvediag/report/model_history.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
-#include "valvediag/atomic_file.hpp"
+#include "valvediag/io/atomic_file.hpp"
 
 namespace valvediag {
 

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/effect_estimators.hpp"
+#include "valvediag/model/effect_estimators.hpp"
 
 namespace valvediag::report_format {
 

@@ -1,4 +1,4 @@
-#include "valvediag/sweep_report.hpp"
+#include "valvediag/report/sweep_report.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -8,9 +8,9 @@
 #include <stdexcept>
 
 #include "number_format.hpp"
-#include "valvediag/diagnosis_report.hpp"
-#include "valvediag/html_report.hpp"
-#include "valvediag/verdict.hpp"
+#include "valvediag/diagnose/verdict.hpp"
+#include "valvediag/report/diagnosis_report.hpp"
+#include "valvediag/report/html_report.hpp"
 
 namespace valvediag {
 

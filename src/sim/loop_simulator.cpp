@@ -1,4 +1,4 @@
-#include "valvediag/loop_simulator.hpp"
+#include "valvediag/sim/loop_simulator.hpp"
 
 #include <algorithm>
 #include <cmath>

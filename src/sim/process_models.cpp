@@ -1,9 +1,9 @@
-#include "valvediag/process_models.hpp"
+#include "valvediag/sim/process_models.hpp"
 
 #include <cmath>
 #include <stdexcept>
 
-#include "valvediag/text_stats.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 namespace {

@@ -1,4 +1,4 @@
-#include "valvediag/random_loop.hpp"
+#include "valvediag/sim/random_loop.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <random>
 #include <stdexcept>
 
-#include "valvediag/text_stats.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

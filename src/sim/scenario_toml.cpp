@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/file_position.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/io/file_position.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 namespace valvediag {
 

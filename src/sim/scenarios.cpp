@@ -1,4 +1,4 @@
-#include "valvediag/scenarios.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 #include <functional>
 #include <utility>

@@ -1,11 +1,11 @@
-#include "valvediag/valve_effects.hpp"
+#include "valvediag/sim/valve_effects.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <type_traits>
 
-#include "valvediag/text_stats.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 namespace {

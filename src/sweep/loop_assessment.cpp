@@ -1,4 +1,4 @@
-#include "valvediag/loop_assessment.hpp"
+#include "valvediag/sweep/loop_assessment.hpp"
 
 #include <algorithm>
 #include <chrono>

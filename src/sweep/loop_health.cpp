@@ -1,12 +1,12 @@
-#include "valvediag/loop_health.hpp"
+#include "valvediag/sweep/loop_health.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <numeric>
 
-#include "valvediag/identifiability.hpp"
-#include "valvediag/limit_cycle.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/core/identifiability.hpp"
+#include "valvediag/diagnose/limit_cycle.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 

@@ -1,14 +1,14 @@
-#include "valvediag/loop_verdict.hpp"
+#include "valvediag/sweep/loop_verdict.hpp"
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <stdexcept>
 
-#include "valvediag/stiction_quantification.hpp"
-#include "valvediag/valve_travel.hpp"
-#include "valvediag/verdict.hpp"
-#include "valvediag/whole_record_test.hpp"
+#include "valvediag/core/stiction_quantification.hpp"
+#include "valvediag/diagnose/valve_travel.hpp"
+#include "valvediag/diagnose/verdict.hpp"
+#include "valvediag/diagnose/whole_record_test.hpp"
 
 namespace valvediag {
 

@@ -1,4 +1,4 @@
-#include "valvediag/quiet_lead_in.hpp"
+#include "valvediag/sweep/quiet_lead_in.hpp"
 
 #include <algorithm>
 #include <cmath>

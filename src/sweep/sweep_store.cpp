@@ -1,4 +1,4 @@
-#include "valvediag/sweep_store.hpp"
+#include "valvediag/sweep/sweep_store.hpp"
 
 #include <sqlite3.h>
 
@@ -8,8 +8,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "valvediag/recorder.hpp"
-#include "valvediag/schema_versions.hpp"
+#include "valvediag/recorder/recorder.hpp"
+#include "valvediag/recorder/schema_versions.hpp"
 
 namespace valvediag {
 

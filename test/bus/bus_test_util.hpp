@@ -12,7 +12,7 @@
 #include <string>
 #include <thread>
 
-#include "valvediag/site_config.hpp"
+#include "valvediag/drivers/site_config.hpp"
 
 namespace valvediag::test {
 

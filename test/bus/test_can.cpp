@@ -13,8 +13,8 @@
 #include <fstream>
 
 #include "bus_test_util.hpp"
-#include "valvediag/can_bus.hpp"
-#include "valvediag/sim_plc.hpp"
+#include "valvediag/drivers/can_bus.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;

@@ -4,8 +4,8 @@
 
 #include <string>
 
-#include "valvediag/dbc.hpp"
-#include "valvediag/site_config.hpp"
+#include "valvediag/drivers/dbc.hpp"
+#include "valvediag/drivers/site_config.hpp"
 
 using namespace valvediag;
 

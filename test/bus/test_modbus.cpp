@@ -7,8 +7,8 @@
 #include <cmath>
 
 #include "bus_test_util.hpp"
-#include "valvediag/modbus_bus.hpp"
-#include "valvediag/sim_plc.hpp"
+#include "valvediag/drivers/modbus_bus.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;

@@ -19,7 +19,7 @@
 #include <thread>
 
 #include "bus_test_util.hpp"
-#include "valvediag/modbus_bus.hpp"
+#include "valvediag/drivers/modbus_bus.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;

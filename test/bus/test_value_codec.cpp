@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <stdexcept>
 
-#include "valvediag/value_codec.hpp"
+#include "valvediag/drivers/value_codec.hpp"
 
 using namespace valvediag;
 

@@ -4,8 +4,8 @@
 #include <cstdio>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/identification.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/core/identification.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/csv_reader.hpp"
+#include "valvediag/io/csv_reader.hpp"
 
 namespace valvediag::test {
 

@@ -5,7 +5,7 @@
 #include <random>
 #include <vector>
 
-#include "valvediag/autocorrelation.hpp"
+#include "valvediag/core/autocorrelation.hpp"
 
 using namespace valvediag;
 

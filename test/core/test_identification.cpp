@@ -4,7 +4,7 @@
 #include <cmath>
 #include <random>
 
-#include "valvediag/identification.hpp"
+#include "valvediag/core/identification.hpp"
 
 using namespace valvediag;
 

@@ -2,7 +2,7 @@
 
 #include <random>
 
-#include "valvediag/nnls.hpp"
+#include "valvediag/core/nnls.hpp"
 
 using namespace valvediag;
 

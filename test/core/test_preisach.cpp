@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <random>
 
-#include "valvediag/preisach.hpp"
+#include "valvediag/core/preisach.hpp"
 
 using namespace valvediag;
 

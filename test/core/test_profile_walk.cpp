@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "valvediag/profile_walk.hpp"
+#include "valvediag/core/profile_walk.hpp"
 
 using namespace valvediag;
 

@@ -11,10 +11,10 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/identification.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/stiction_quantification.hpp"
-#include "valvediag/valve_effects.hpp"
+#include "valvediag/core/identification.hpp"
+#include "valvediag/core/stiction_quantification.hpp"
+#include "valvediag/sim/scenarios.hpp"
+#include "valvediag/sim/valve_effects.hpp"
 
 using namespace valvediag;
 

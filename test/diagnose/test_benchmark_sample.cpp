@@ -9,8 +9,8 @@
 #include <cstdio>
 #include <set>
 
-#include "valvediag/diagnosis_benchmark.hpp"
-#include "valvediag/parallel_for.hpp"
+#include "valvediag/core/parallel_for.hpp"
+#include "valvediag/diagnose/diagnosis_benchmark.hpp"
 
 using namespace valvediag;
 

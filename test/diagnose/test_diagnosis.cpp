@@ -16,10 +16,10 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/diagnosis.hpp"
-#include "valvediag/random_loop.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/verdict.hpp"
+#include "valvediag/diagnose/diagnosis.hpp"
+#include "valvediag/diagnose/verdict.hpp"
+#include "valvediag/sim/random_loop.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 

@@ -11,12 +11,12 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/diagnosis.hpp"
-#include "valvediag/limit_cycle.hpp"
-#include "valvediag/mat_reader.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/valve_effects.hpp"
-#include "valvediag/verdict.hpp"
+#include "valvediag/diagnose/diagnosis.hpp"
+#include "valvediag/diagnose/limit_cycle.hpp"
+#include "valvediag/diagnose/verdict.hpp"
+#include "valvediag/io/mat_reader.hpp"
+#include "valvediag/sim/scenarios.hpp"
+#include "valvediag/sim/valve_effects.hpp"
 
 using namespace valvediag;
 

@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/pairwise_ranking.hpp"
-#include "valvediag/text_stats.hpp"
+#include "valvediag/diagnose/pairwise_ranking.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 using valvediag::rank_by_wins;
 

@@ -4,7 +4,7 @@
 #include <random>
 #include <stdexcept>
 
-#include "valvediag/residual_analysis.hpp"
+#include "valvediag/diagnose/residual_analysis.hpp"
 
 using namespace valvediag;
 

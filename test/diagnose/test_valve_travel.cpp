@@ -12,10 +12,10 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/valve_effects.hpp"
-#include "valvediag/valve_travel.hpp"
-#include "valvediag/verdict.hpp"
+#include "valvediag/diagnose/valve_travel.hpp"
+#include "valvediag/diagnose/verdict.hpp"
+#include "valvediag/sim/scenarios.hpp"
+#include "valvediag/sim/valve_effects.hpp"
 
 using namespace valvediag;
 

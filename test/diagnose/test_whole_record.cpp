@@ -10,11 +10,11 @@
 
 #include "../common/plant_csv.hpp"
 #include "../common/sanitized.hpp"
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/diagnosis.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/verdict.hpp"
-#include "valvediag/whole_record_test.hpp"
+#include "valvediag/diagnose/diagnosis.hpp"
+#include "valvediag/diagnose/verdict.hpp"
+#include "valvediag/diagnose/whole_record_test.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 namespace fs = std::filesystem;
 using namespace valvediag;

@@ -12,9 +12,9 @@
 #include <string>
 #include <string_view>
 
-#include "valvediag/dbc.hpp"
-#include "valvediag/site_config.hpp"
-#include "valvediag/value_codec.hpp"
+#include "valvediag/drivers/dbc.hpp"
+#include "valvediag/drivers/site_config.hpp"
+#include "valvediag/drivers/value_codec.hpp"
 
 namespace valvediag::fuzz {
 

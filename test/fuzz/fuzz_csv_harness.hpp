@@ -7,9 +7,9 @@
 #include <string>
 #include <string_view>
 
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/data_checks.hpp"
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/io/data_error.hpp"
 
 namespace valvediag::fuzz {
 

@@ -9,7 +9,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "valvediag/atomic_file.hpp"
+#include "valvediag/io/atomic_file.hpp"
 
 namespace fs = std::filesystem;
 using valvediag::AtomicFile;

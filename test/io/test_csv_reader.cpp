@@ -12,8 +12,8 @@
 #include <string>
 #include <thread>
 
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/io/data_error.hpp"
 
 namespace fs = std::filesystem;
 using valvediag::CsvOptions;

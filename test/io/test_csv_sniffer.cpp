@@ -5,8 +5,8 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/io/data_error.hpp"
 
 using valvediag::CsvOptions;
 using valvediag::DataError;

@@ -15,7 +15,7 @@
 
 #include "../../src/cli/isolated_mat_reader.hpp"
 #include "mat_fixtures.hpp"
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/data_error.hpp"
 
 namespace fs = std::filesystem;
 using namespace valvediag;

@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "mat_fixtures.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/mat_reader.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/io/mat_reader.hpp"
 
 namespace fs = std::filesystem;
 using namespace valvediag;

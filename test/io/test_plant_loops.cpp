@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/data_checks.hpp"
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/io/data_error.hpp"
 
 namespace fs = std::filesystem;
 using valvediag::CsvOptions;

@@ -8,10 +8,10 @@
 #include <sstream>
 #include <string>
 
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/csv_writer.hpp"
-#include "valvediag/data_checks.hpp"
-#include "valvediag/data_error.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/io/csv_writer.hpp"
+#include "valvediag/io/data_checks.hpp"
+#include "valvediag/io/data_error.hpp"
 
 namespace fs = std::filesystem;
 using valvediag::DataError;

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/effect_estimators.hpp"
+#include "valvediag/model/effect_estimators.hpp"
 
 using namespace valvediag;
 

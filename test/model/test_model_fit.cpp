@@ -8,9 +8,9 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/hammerstein.hpp"
-#include "valvediag/model_fit.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/core/hammerstein.hpp"
+#include "valvediag/model/model_fit.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 

@@ -3,7 +3,7 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/model_spec.hpp"
+#include "valvediag/model/model_spec.hpp"
 
 using namespace valvediag;
 

@@ -17,7 +17,7 @@
 
 #include "../bus/bus_test_util.hpp"
 #include "../common/run_cli.hpp"
-#include "valvediag/sim_plc.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;

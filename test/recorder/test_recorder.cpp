@@ -12,12 +12,12 @@
 
 #include "../bus/bus_test_util.hpp"
 #include "../common/sqlite_exec.hpp"
-#include "valvediag/bus_factory.hpp"
-#include "valvediag/recorder.hpp"
-#include "valvediag/recorder_lock.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/sim_plc.hpp"
-#include "valvediag/utc_time.hpp"
+#include "valvediag/drivers/bus_factory.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
+#include "valvediag/recorder/recorder.hpp"
+#include "valvediag/recorder/recorder_lock.hpp"
+#include "valvediag/sim/scenarios.hpp"
+#include "valvediag/util/utc_time.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;

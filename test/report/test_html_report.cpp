@@ -10,10 +10,10 @@
 #include <string>
 
 #include "page_checks.hpp"
-#include "valvediag/diagnosis_report.hpp"
-#include "valvediag/gnuplot.hpp"
-#include "valvediag/html_report.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/report/diagnosis_report.hpp"
+#include "valvediag/report/gnuplot.hpp"
+#include "valvediag/report/html_report.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 using report_test::check_self_contained;

@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "valvediag/loop_simulator.hpp"
+#include "valvediag/sim/loop_simulator.hpp"
 
 using namespace valvediag;
 

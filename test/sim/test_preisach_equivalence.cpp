@@ -1,13 +1,13 @@
 // Proposition 1 of the paper: He's stiction model is a Preisach model. The He block of the
-// simulator and PreisachModel with he_stiction_weights() (include/valvediag/preisach.hpp) must
+// simulator and PreisachModel with he_stiction_weights() (include/valvediag/core/preisach.hpp) must
 // agree up to the discretization of the Preisach plane.
 #include <doctest/doctest.h>
 
 #include <cmath>
 #include <vector>
 
-#include "valvediag/preisach.hpp"
-#include "valvediag/valve_effects.hpp"
+#include "valvediag/core/preisach.hpp"
+#include "valvediag/sim/valve_effects.hpp"
 
 using namespace valvediag;
 

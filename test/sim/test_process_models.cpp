@@ -4,7 +4,7 @@
 #include <functional>
 #include <stdexcept>
 
-#include "valvediag/process_models.hpp"
+#include "valvediag/sim/process_models.hpp"
 
 using namespace valvediag;
 

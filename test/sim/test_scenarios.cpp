@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "valvediag/scenarios.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 

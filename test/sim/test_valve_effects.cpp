@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "valvediag/valve_effects.hpp"
+#include "valvediag/sim/valve_effects.hpp"
 
 using namespace valvediag;
 

@@ -8,8 +8,8 @@
 #include <random>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/loop_health.hpp"
-#include "valvediag/mat_reader.hpp"
+#include "valvediag/io/mat_reader.hpp"
+#include "valvediag/sweep/loop_health.hpp"
 
 using namespace valvediag;
 

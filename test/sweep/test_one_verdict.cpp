@@ -16,9 +16,9 @@
 
 #include "../common/run_cli.hpp"
 #include "../common/sanitized.hpp"
-#include "valvediag/loop_assessment.hpp"
-#include "valvediag/loop_verdict.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/sim/scenarios.hpp"
+#include "valvediag/sweep/loop_assessment.hpp"
+#include "valvediag/sweep/loop_verdict.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;

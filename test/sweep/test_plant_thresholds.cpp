@@ -17,9 +17,9 @@
 
 #include "../common/plant_csv.hpp"
 #include "../common/sanitized.hpp"
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/data_error.hpp"
-#include "valvediag/loop_assessment.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/io/data_error.hpp"
+#include "valvediag/sweep/loop_assessment.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;

@@ -8,10 +8,10 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
-#include "valvediag/loop_assessment.hpp"
-#include "valvediag/loop_health.hpp"
-#include "valvediag/quiet_lead_in.hpp"
-#include "valvediag/scenarios.hpp"
+#include "valvediag/sim/scenarios.hpp"
+#include "valvediag/sweep/loop_assessment.hpp"
+#include "valvediag/sweep/loop_health.hpp"
+#include "valvediag/sweep/quiet_lead_in.hpp"
 
 using namespace valvediag;
 

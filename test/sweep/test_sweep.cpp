@@ -22,14 +22,14 @@
 #include "../common/plant_csv.hpp"
 #include "../common/sanitized.hpp"
 #include "../common/sqlite_exec.hpp"
-#include "valvediag/csv_reader.hpp"
-#include "valvediag/loop_assessment.hpp"
-#include "valvediag/model_fit.hpp"
-#include "valvediag/model_spec.hpp"
-#include "valvediag/scenarios.hpp"
-#include "valvediag/sweep_report.hpp"
-#include "valvediag/sweep_store.hpp"
-#include "valvediag/verdict.hpp"
+#include "valvediag/diagnose/verdict.hpp"
+#include "valvediag/io/csv_reader.hpp"
+#include "valvediag/model/model_fit.hpp"
+#include "valvediag/model/model_spec.hpp"
+#include "valvediag/report/sweep_report.hpp"
+#include "valvediag/sim/scenarios.hpp"
+#include "valvediag/sweep/loop_assessment.hpp"
+#include "valvediag/sweep/sweep_store.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;

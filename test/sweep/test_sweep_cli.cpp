@@ -15,8 +15,8 @@
 #include "../common/plant_csv.hpp"
 #include "../common/run_cli.hpp"
 #include "../common/sanitized.hpp"
-#include "valvediag/sim_plc.hpp"
-#include "valvediag/site_config.hpp"
+#include "valvediag/drivers/sim_plc.hpp"
+#include "valvediag/drivers/site_config.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;

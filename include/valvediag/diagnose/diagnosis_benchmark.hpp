@@ -1,0 +1,57 @@
+// The randomized benchmark of the diagnosis (random_loop.hpp): one case is a drawn loop with its
+// hidden effects; `diagnose` runs from the case's start model, and the outcome is judged against
+// the truth: named first, in the top two, whether adding the true effect gains on held-out data,
+// how close its fitted parameters come, and for controls whether anything was found at all.
+// scripts/accuracy.sh prints the tables over a development and a test range of seeds; CI runs a
+// small fixed sample (test/diagnose/test_benchmark_sample.cpp).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "valvediag/diagnose/diagnosis.hpp"
+#include "valvediag/sim/random_loop.hpp"
+
+namespace valvediag {
+
+struct ParameterError {
+  std::string effect, name;
+  double truth = 0.0, estimate = 0.0;
+};
+
+struct BenchmarkOutcome {
+  RandomLoop loop;
+  std::vector<std::string> ranked;  // the findings' effects, most likely first
+  std::vector<bool> supported;      // same order
+  std::string first;                // "" when diagnose named nothing
+  bool named_first = false;         // a hidden effect ranks first (controls: false)
+  bool top_two = false;             // every hidden effect in the top two (one: in the top two)
+  bool true_supported = false;      // the (first) hidden effect's finding is supported
+  // The hidden effect's trial against the start model: the gain the diagnosis scores (the smaller
+  // of the held-out and estimation gains) and the gain on the held-out part, in points.
+  double true_gain = 0.0, true_validation_gain = 0.0;
+  bool gains = false;                  // true_gain >= 2 points (the target)
+  bool false_alarm = false;            // a control with a supported finding
+  std::string false_effect;            // what it found
+  std::vector<ParameterError> errors;  // the hidden effects' fitted parameters against the truth
+  double seconds = 0.0;
+  std::string error;  // the diagnosis threw: why
+};
+
+// Runs the diagnosis of one case (single step from its start model, its validation fraction).
+BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt = {});
+
+// The cases of a seed range: seed s draws category random_loop_categories()[s % 12], so any 12
+// consecutive seeds hold each category once.
+std::vector<std::string> benchmark_categories(std::uint64_t first_seed, std::uint64_t count);
+
+// Per category and overall: counts, named first, top two, gains >= 2, false alarms, parameter
+// errors; then the confusion table (hidden effect against first finding). Plain text.
+std::string format_benchmark(const std::vector<BenchmarkOutcome>& outcomes,
+                             const std::string& title);
+// Two ranges side by side (development and test), one row per category.
+std::string format_benchmark_pair(const std::vector<BenchmarkOutcome>& dev,
+                                  const std::vector<BenchmarkOutcome>& test);
+
+}  // namespace valvediag
