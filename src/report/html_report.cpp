@@ -17,6 +17,7 @@
 #include "valvediag/core/autocorrelation.hpp"
 #include "valvediag/report/fit_report.hpp"
 #include "valvediag/util/text_stats.hpp"
+#include "valvediag/util/utc_time.hpp"
 
 namespace valvediag {
 
@@ -312,12 +313,12 @@ std::string label_text(const std::string& s) {
 struct TimeAxis {
   double origin = 0.0;  // added to t
   bool clock = false;
-  double span = 0.0;  // seconds the record covers
+  double first = 0.0, last = 0.0;  // the record's first and last t
 
   explicit TimeAxis(const LoopData& d) {
     clock = std::isfinite(d.clock_at_zero_s) && !d.t.empty();
     if (clock) origin = d.clock_at_zero_s;
-    if (!d.t.empty()) span = d.t.back() - d.t.front();
+    if (!d.t.empty()) first = d.t.front(), last = d.t.back();
   }
   double at(double t) const { return origin + t; }
   // An x coordinate: the clock needs more digits than the data's values.
@@ -328,21 +329,17 @@ struct TimeAxis {
     return buf;
   }
   // gnuplot's x tick format and label for the bottom plot of a figure.
-  std::string labels(const LoopData& d) const {
+  std::string labels() const {
     if (!clock) return "set format x '%g'\nset xlabel 't (s)'\n";
+    const double span = last - first;
     const char* fmt = span <= 600 ? "%H:%M:%S" : span <= 86400 ? "%H:%M" : "%d %b %H:%M";
-    const std::string from = clock_text(at(d.t.front())), to = clock_text(at(d.t.back()));
     return std::string("set xtics time\nset format x '") + fmt +
-           "' timedate\nset xlabel 'time: " + from + " .. " + to + " (as stamped in the data)'\n";
+           "' timedate\nset xlabel 'time: " + stamp(first) + " .. " + stamp(last) +
+           " (as stamped in the data)'\n";
   }
-  // "2024-09-01 21:55:00" of a clock value.
-  static std::string clock_text(double v) {
-    const auto secs = static_cast<std::time_t>(std::floor(v));
-    std::tm tm{};
-    gmtime_r(&secs, &tm);
-    char b[32];
-    std::strftime(b, sizeof b, "%Y-%m-%d %H:%M:%S", &tm);
-    return b;
+  // "2024-09-01 21:55:00": t on the data's clock, to the second.
+  std::string stamp(double t) const {
+    return utc_text(static_cast<std::time_t>(std::floor(at(t))), "%Y-%m-%d %H:%M:%S");
   }
 };
 
@@ -436,7 +433,7 @@ PlotJob trends_plot(const LoopData& d, std::size_t buckets) {
     if (!sp.empty()) o << ", " << sp << " with lines lw 1.2 dt 2 lc rgb '#2e8b57' title 'SP'";
     o << "\n";
   }
-  o << axis.labels(d) << "set ylabel 'OP (%)'\n";
+  o << axis.labels() << "set ylabel 'OP (%)'\n";
   o << "plot " << op << " with lines lw 1.2 lc rgb '#c05010' title 'OP'";
   if (!mv.empty())
     o << ", " << mv << " with lines lw 1.2 lc rgb '#7a3fa0' title 'valve position (MV)'";
@@ -461,7 +458,7 @@ PlotJob fit_plot(const ReportContent& c, std::size_t buckets) {
   const std::string sim = p.series(axis, d.t, f.y_sim, f.first_sample, n, buckets);
   shade(p, c);
   p.out() << "set lmargin 10\nset rmargin 3\n"
-          << axis.labels(d) << "set ylabel 'PV'\n"
+          << axis.labels() << "set ylabel 'PV'\n"
           << "plot " << pv << " with lines lw 1.2 lc rgb '#555555' title 'measured PV', " << sim
           << " with lines lw 1.2 lc rgb '#d62728' title 'simulated PV (model)'" << shade_keys(c)
           << "\n";
@@ -483,7 +480,7 @@ PlotJob residual_plot(const ReportContent& c, std::size_t buckets) {
   const std::string res = p.series(axis, d.t, r, f.first_sample, d.size(), buckets);
   shade(p, c);
   auto& o = p.out();
-  o << "set lmargin 10\nset rmargin 3\n" << axis.labels(d) << "set ylabel 'PV - simulated PV'\n";
+  o << "set lmargin 10\nset rmargin 3\n" << axis.labels() << "set ylabel 'PV - simulated PV'\n";
   o << "plot " << res
     << " with lines lw 1 lc rgb '#333333' title 'residual', 0 with lines lc rgb "
        "'#999999' notitle";
@@ -878,8 +875,8 @@ void record_rows(std::ostringstream& o, const LoopData& d, const std::string& na
           " s" + e(span_note) + ")");
   if (const TimeAxis axis(d); axis.clock)
     row(o, "time stamps",
-        e(TimeAxis::clock_text(axis.at(d.t.front()))) + " .. " +
-            e(TimeAxis::clock_text(axis.at(d.t.back()))) + " (as stamped in the data)");
+        e(axis.stamp(axis.first)) + " .. " + e(axis.stamp(axis.last)) +
+            " (as stamped in the data)");
   row(o, "sample period Ts", e(num(d.sample_period(), 3)) + " s");
 }
 
@@ -960,11 +957,9 @@ void where_section(std::ostringstream& o, const ReportContent& c) {
          "<th>residual RMS</th><th>share of the squared error</th></tr>\n";
     for (const auto& iv : a.intervals)
       o << "<tr>"
-        << (axis.clock
-                ? "<td>" + e(TimeAxis::clock_text(axis.at(t_at(t, iv.begin)))) + "</td><td>" +
-                      e(TimeAxis::clock_text(axis.at(t_at(t, iv.end > 0 ? iv.end - 1 : 0)))) +
-                      "</td>"
-                : std::string())
+        << (axis.clock ? "<td>" + e(axis.stamp(t_at(t, iv.begin))) + "</td><td>" +
+                             e(axis.stamp(t_at(t, iv.end > 0 ? iv.end - 1 : 0))) + "</td>"
+                       : std::string())
         << "<td class=\"num\">" << e(num(t_at(t, iv.begin), 1)) << "</td><td class=\"num\">"
         << e(num(t_at(t, iv.end > 0 ? iv.end - 1 : 0), 1)) << "</td><td class=\"num\">"
         << iv.end - iv.begin << "</td><td class=\"num\">" << e(num(iv.rms, 3))
@@ -1062,9 +1057,7 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
       for (const auto& iv : f.intervals) {
         const double a0 = t_at(t, iv.begin), a1 = t_at(t, iv.end > 0 ? iv.end - 1 : 0);
         o << "<li>t " << e(num(a0, 1)) << " .. " << e(num(a1, 1)) << " s";
-        if (axis.clock)
-          o << " (" << e(TimeAxis::clock_text(axis.at(a0))) << " .. "
-            << e(TimeAxis::clock_text(axis.at(a1))) << ")";
+        if (axis.clock) o << " (" << e(axis.stamp(a0)) << " .. " << e(axis.stamp(a1)) << ")";
         o << ", " << e(num(100 * iv.share, 0)) << " % of the error</li>\n";
       }
       for (const auto& g : f.regions)

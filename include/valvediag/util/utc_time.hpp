@@ -9,12 +9,16 @@
 
 namespace valvediag {
 
-inline std::string utc_timestamp(std::time_t t = std::time(nullptr)) {
+// t as UTC in a strftime format.
+inline std::string utc_text(std::time_t t, const char* format) {
   std::tm tm{};
   gmtime_r(&t, &tm);
-  char b[32];
-  std::strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return b;
+  char b[64];
+  return std::strftime(b, sizeof b, format, &tm) > 0 ? std::string(b) : std::string();
+}
+
+inline std::string utc_timestamp(std::time_t t = std::time(nullptr)) {
+  return utc_text(t, "%Y-%m-%dT%H:%M:%SZ");
 }
 
 // Seconds since 1970 of a stamp utc_timestamp() wrote; NaN for any other text.
