@@ -203,6 +203,7 @@ std::size_t output_horizon(const std::vector<double>& y, std::size_t from, std::
 struct KStepFitness {
   double estimation = std::numeric_limits<double>::quiet_NaN();
   double validation = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> output;  // the prediction with its offsets (empty: none)
 };
 KStepFitness k_step_fitness(const ModelFit& f, const std::vector<double>& y, const KStepJudge& j) {
   KStepFitness r;
@@ -229,6 +230,7 @@ KStepFitness k_step_fitness(const ModelFit& f, const std::vector<double>& y, con
   for (std::size_t t = from; t < y.size(); ++t) yk[t] += offset[t];
   r.estimation = fitness_percent(y, yk, from + h, e0);
   if (e0 < y.size()) r.validation = fitness_percent(y, yk, e0, y.size());
+  r.output = std::move(yk);
   return r;
 }
 
@@ -262,7 +264,7 @@ std::map<EffectPair, std::string> nested_winners(const std::vector<double>& y, d
                                                  const std::vector<std::string>& names,
                                                  const std::vector<ModelFit>& fits,
                                                  const std::vector<Finding>& findings,
-                                                 double margin) {
+                                                 double margin, const KStepJudge& judge) {
   std::map<EffectPair, std::string> out;
   auto index = [&names](const char* e) {
     return static_cast<std::size_t>(std::find(names.begin(), names.end(), e) - names.begin());
@@ -286,11 +288,23 @@ std::map<EffectPair, std::string> nested_winners(const std::vector<double>& y, d
           effect_parameter_count(wide, fw, Ts) - effect_parameter_count(narrow, fn, Ts);
       // On the estimation part, or on the held-out part, which neither was fitted to; or held
       // out by the margin any finding must gain to be supported.
-      wider = b.validation_gain_percent - a.validation_gain_percent >= margin ||
-              lr_refutes(y, fn.y_sim, fw.fitness_percent, fn.fitness_percent, fn.first_sample,
-                         fn.estimation_end, dof) ||
-              lr_refutes(y, fn.y_sim, fw.validation_fitness_percent, fn.validation_fitness_percent,
-                         fn.estimation_end, y.size(), dof);
+      // Tested on what the gains measure: the simulated output, or the judge's k-step
+      // prediction (an integrating simulation's drift would swamp the difference).
+      if (judge.horizon > 0) {
+        const KStepFitness kn = k_step_fitness(fn, y, judge);
+        const KStepFitness kw = k_step_fitness(fw, y, judge);
+        wider = b.validation_gain_percent - a.validation_gain_percent >= margin ||
+                lr_refutes(y, kn.output, kw.estimation, kn.estimation, judge.from + judge.horizon,
+                           judge.estimation_end, dof) ||
+                lr_refutes(y, kn.output, kw.validation, kn.validation, judge.estimation_end,
+                           y.size(), dof);
+      } else {
+        wider = b.validation_gain_percent - a.validation_gain_percent >= margin ||
+                lr_refutes(y, fn.y_sim, fw.fitness_percent, fn.fitness_percent, fn.first_sample,
+                           fn.estimation_end, dof) ||
+                lr_refutes(y, fn.y_sim, fw.validation_fitness_percent,
+                           fn.validation_fitness_percent, fn.estimation_end, y.size(), dof);
+      }
     }
     const std::string winner = wider ? wide : narrow;
     out[{narrow, wide}] = winner;
@@ -354,6 +368,9 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // few samples (a lag takes some of it), not across the record, and scanning every delay up
   // to an eighth of the record in each trial cost a climb minutes (3300 samples: 79 s, not 9).
   ModelFitOptions to = fo;
+  // An integrator trial on a model that does not integrate is judged, as that model is, on its
+  // simulated output: fitted to it too.
+  if (!model.has("integrator")) to.integrating_horizon = 0;
   if (model.has("delay") && fo.delay_nk_max <= 0 && step.fit.structure.nk >= 0)
     to.delay_nk_max = 2 * step.fit.structure.nk + fo.structure.nk_max;
   auto fits = fit_models(u, y, Ts, trials, to);
@@ -500,8 +517,16 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
         const ModelFit& pt = fits[static_cast<std::size_t>(pr - step.findings.data())];
         const double dof = effect_parameter_count("preisach", pt, Ts) -
                            (over_trial ? effect_parameter_count(nf.effect, nt, Ts) : 0.0);
-        lr_passes = lr_refutes(y, ref.y_sim, pr->trial_fitness_percent, ref.fitness_percent,
-                               ref.first_sample, ref.estimation_end, dof);
+        if (step.judge.horizon > 0) {  // on what the gains measure, as nested_winners
+          const KStepFitness kr = k_step_fitness(ref, y, step.judge);
+          const KStepFitness kp = k_step_fitness(pt, y, step.judge);
+          lr_passes =
+              lr_refutes(y, kr.output, kp.estimation, kr.estimation,
+                         step.judge.from + step.judge.horizon, step.judge.estimation_end, dof);
+        } else {
+          lr_passes = lr_refutes(y, ref.y_sim, pr->trial_fitness_percent, ref.fitness_percent,
+                                 ref.first_sample, ref.estimation_end, dof);
+        }
       }
       pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent &&
                       beyond > 0 && lr_passes;
@@ -529,7 +554,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // least as well, would win every near tie (measured: deadbands named stiction on an
   // estimation gain 0.02-0.5 points larger).
   const std::map<EffectPair, std::string> wider_wins =
-      nested_winners(y, Ts, names, fits, step.findings, margin);
+      nested_winners(y, Ts, names, fits, step.findings, margin, step.judge);
   auto mutual = [](const std::string& a, const std::string& b) {
     return (is_memory_effect(a) && b == "disturbance") ||
            (is_memory_effect(b) && a == "disturbance");

@@ -28,6 +28,10 @@ struct SseWindow {
   double c;
   const double* load;  // nullptr: the constant c (or, with knots, not filled: see below)
   double ylev;         // integrating: the output before t0
+  // Integrating: the simulated level restarts from the measured output every `anchor` samples
+  // (0: only at t0). Multiple shooting: a random-walk load drifts an integrated simulation
+  // without bound, and over a long record that drift, not the valve, would decide the fit.
+  std::size_t anchor = 0;
   // The load as its knots: load[t0 + k] = knots[j] (1 - frac[k]) + knots[j + 1] frac[k] with
   // j = k / h (the hat functions). knots == nullptr: no load.
   const double* knots = nullptr;
@@ -81,7 +85,13 @@ template <std::size_t NA, std::size_t NB, bool Integrating>
 double simulated_sse(const SseWindow& w) {
   const std::size_t na = NA > 0 ? NA : w.na, nb = NB > 0 ? NB : w.nb;
   double ylev = w.ylev, sse = 0.0;
+  std::size_t next = w.anchor > 0 ? w.t0 + w.anchor : w.end;
   for (std::size_t t = w.t0; t < w.end; ++t) {
+    if constexpr (Integrating)
+      if (t == next) {
+        ylev = w.y[t - 1];
+        next += w.anchor;
+      }
     double s = w.load ? w.load[t] : w.c;
     for (std::size_t i = 1; i <= na; ++i) s -= w.a[i - 1] * w.v[t - i];
     for (std::size_t k = 1; k <= nb; ++k) s += w.b[k - 1] * w.x[t - w.nk - k];
@@ -103,7 +113,13 @@ void simulated_sse4_loop(const std::array<SseWindow, 4>& w, double bound, double
   const double* x = w[0].x;
   std::array<double, 4> ylev{}, sse{};
   ylev.fill(w[0].ylev);
+  std::size_t next = w[0].anchor > 0 ? w[0].t0 + w[0].anchor : w[0].end;
   for (std::size_t t = w[0].t0; t < w[0].end; ++t) {
+    if constexpr (Integrating)
+      if (t == next) {
+        ylev.fill(y[t - 1]);
+        next += w[0].anchor;
+      }
     for (std::size_t l = 0; l < 4; ++l) {
       const SseWindow& q = w[l];
       double s = q.load ? q.load[t] : q.c;
@@ -151,7 +167,13 @@ void simulated_sse4(const std::array<SseWindow, 4>& w, double bound, double* out
     // Load: the interval j between knots j and j + 1 and those knots, changed every h samples.
     double left[4] = {}, right[4] = {};
     std::size_t j = 0, next = t0;
+    std::size_t next_anchor = w[0].anchor > 0 ? t0 + w[0].anchor : end;
     for (std::size_t t = t0; t < end; ++t) {
+      if constexpr (Integrating)
+        if (t == next_anchor) {
+          for (std::size_t l = 0; l < 4; ++l) ylev[l] = y[t - 1];
+          next_anchor += w[0].anchor;
+        }
       double fk = 0.0;
       if constexpr (Load) {
         if (t == next) {
@@ -787,6 +809,7 @@ SseWindow ArxEstimator::window(const LinearFit& f, const std::vector<double>& x,
                    .c = f.c,
                    .load = d,
                    .ylev = opt_.integrating ? y_[t0_ - 1] : 0.0,
+                   .anchor = opt_.integrating ? opt_.level_anchor : 0,
                    .knots = f.drift_knots.empty() ? nullptr : f.drift_knots.data(),
                    .knot_count = f.drift_knots.size(),
                    .h = h_,

@@ -706,6 +706,7 @@ LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, 
   lo.drift = spec.has("disturbance");
   lo.drift_knot_spacing = opt.disturbance_knot_spacing;
   lo.end = estimation_end(N, opt);
+  if (lo.integrating) lo.level_anchor = opt.integrating_horizon;
   return lo;
 }
 

@@ -330,9 +330,10 @@ TEST_CASE("an integrating model is judged k steps ahead: the true deadband gains
   const RandomLoop r = draw_random_loop(49, "deadband");
   REQUIRE(r.start_model == "integrator");
   const LoopData d = simulate_random_loop(r);
-  DiagnoseOptions o;
-  o.candidates = {"deadband", "disturbance", "order"};
-  const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("integrator"), o);
+  // Every candidate, as `diagnose` runs: a load gains about as much as the band here (+46.7 /
+  // +44.8 against +44.6 / +80.9), and which of the two a narrower contest puts first is the
+  // ranking's business (a valve with memory and a load imitate each other), not the judge's.
+  const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("integrator"));
   const DiagnosisStep& s = dg.last();
   REQUIRE(s.fit.integrating);
   CHECK(s.judge.horizon > 0);

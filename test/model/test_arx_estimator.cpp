@@ -118,40 +118,88 @@ TEST_CASE("ArxEstimator: the pruned, batched structure search gives the plain sc
           valvediag::test::release_only()) {
   // na 1..5 and nb 1..3 cover the unrolled kernels (orders to 4) and the general one (na 5); nk
   // to 13 gives batches of four and a partial last batch.
+  // An integrating output also with its level restarted every 17 samples (level_anchor).
   int cases = 0;
   for (std::uint64_t seed = 1; seed <= 6; ++seed)
     for (const bool drift : {false, true})
-      for (const bool integrating : {false, true}) {
-        CAPTURE(seed);
+      for (const bool integrating : {false, true})
+        for (const std::size_t anchor : {std::size_t{0}, std::size_t{17}}) {
+          if (anchor > 0 && !integrating) continue;
+          CAPTURE(seed);
+          CAPTURE(drift);
+          CAPTURE(integrating);
+          CAPTURE(anchor);
+          const Record r = record(seed, integrating);
+          LinearOptions opt;
+          opt.range = StructureRange{1, 5, 1, 3, 0, 13};
+          opt.drift = drift;
+          opt.integrating = integrating;
+          opt.level_anchor = anchor;
+          opt.end = 650;  // an estimation window shorter than the record, as with a held-out part
+          const ArxEstimator est(r.y, opt);
+          LinearOptions plain_opt = opt;
+          plain_opt.plain_scan = true;
+          const ArxEstimator plain(r.y, plain_opt);
+          // Several valve positions in a row, as a search makes them: the later ones start from
+          // the structure the earlier won.
+          for (const double shift : {0.0, 0.7, -1.3}) {
+            std::vector<double> x = r.x;
+            for (std::size_t t = 0; t < x.size(); ++t)
+              x[t] += shift * std::sin(static_cast<double>(t) / 40.0);
+            const std::vector<LinearFit> all = every_structure(est, x);
+            REQUIRE(!all.empty());
+            check_same(est.fit(x), plain_best(all));
+            check_same(est.fit(x, true), plain_parsimonious(all, opt.parsimony_percent));
+            // The reference search (the benchmark's baseline) agrees too.
+            check_close(plain.fit(x), plain_best(all));
+            check_close(plain.fit(x, true), plain_parsimonious(all, opt.parsimony_percent));
+            ++cases;
+          }
+        }
+  CHECK(cases == 108);
+}
+
+TEST_CASE("ArxEstimator: an integrating fit's criterion restarts the level every level_anchor") {
+  // The error of the simulated rate integrated from the measured output at t0 + m * anchor
+  // (multiple shooting): recomputed here from the fit's coefficients, for the unrolled kernels
+  // (na to 4) and the general loop (na 5), with a constant and with a load's knots.
+  int checked = 0;
+  for (const bool drift : {false, true})
+    for (const std::size_t anchor :
+         {std::size_t{0}, std::size_t{1}, std::size_t{7}, std::size_t{50}})
+      for (const ArxStructure s : {ArxStructure{2, 2, 3}, ArxStructure{5, 1, 2}}) {
         CAPTURE(drift);
-        CAPTURE(integrating);
-        const Record r = record(seed, integrating);
+        CAPTURE(anchor);
+        CAPTURE(s.na);
+        const Record r = record(3, true);
         LinearOptions opt;
         opt.range = StructureRange{1, 5, 1, 3, 0, 13};
         opt.drift = drift;
-        opt.integrating = integrating;
-        opt.end = 650;  // an estimation window shorter than the record, as with a held-out part
+        opt.integrating = true;
+        opt.level_anchor = anchor;
+        opt.end = 650;
         const ArxEstimator est(r.y, opt);
-        LinearOptions plain_opt = opt;
-        plain_opt.plain_scan = true;
-        const ArxEstimator plain(r.y, plain_opt);
-        // Several valve positions in a row, as a search makes them: the later ones start from
-        // the structure the earlier won.
-        for (const double shift : {0.0, 0.7, -1.3}) {
-          std::vector<double> x = r.x;
-          for (std::size_t t = 0; t < x.size(); ++t)
-            x[t] += shift * std::sin(static_cast<double>(t) / 40.0);
-          const std::vector<LinearFit> all = every_structure(est, x);
-          REQUIRE(!all.empty());
-          check_same(est.fit(x), plain_best(all));
-          check_same(est.fit(x, true), plain_parsimonious(all, opt.parsimony_percent));
-          // The reference search (the benchmark's baseline) agrees too.
-          check_close(plain.fit(x), plain_best(all));
-          check_close(plain.fit(x, true), plain_parsimonious(all, opt.parsimony_percent));
-          ++cases;
+        const LinearFit f = est.fit(r.x, s);
+        REQUIRE(f.ok);
+        const std::vector<double> load = est.drift_series(f);
+        const std::size_t t0 = est.start(), end = est.end();
+        std::vector<double> v(r.y.size(), 0.0);
+        for (std::size_t t = 1; t < t0; ++t) v[t] = r.y[t] - r.y[t - 1];
+        double level = r.y[t0 - 1], sse = 0.0;
+        for (std::size_t t = t0; t < end; ++t) {
+          if (anchor > 0 && t > t0 && (t - t0) % anchor == 0) level = r.y[t - 1];
+          double rate = drift ? load[t] : f.c;
+          for (std::size_t i = 1; i <= f.a.size(); ++i) rate -= f.a[i - 1] * v[t - i];
+          for (std::size_t k = 1; k <= f.b.size(); ++k)
+            rate += f.b[k - 1] * r.x[t - static_cast<std::size_t>(s.nk) - k];
+          v[t] = rate;
+          level += rate;
+          sse += (level - r.y[t]) * (level - r.y[t]);
         }
+        CHECK(f.sse == doctest::Approx(sse).epsilon(1e-9));
+        ++checked;
       }
-  CHECK(cases == 72);
+  CHECK(checked == 16);
 }
 
 // An output from a random ARX system: na, nb up to 3, nk up to 6, poles inside 0.3 .. 0.95.

@@ -361,11 +361,12 @@ TEST_CASE("sweep --reports: a level whose `linear` is stable only by force climb
   CHECK(l["ladder"][1]["fitness_percent"].get<double>() > 0.0);
   CHECK(l["first_missing"] == "integrator");
   // A miss (the label says sticky): a load explains the level's drift better than a friction band
-  // on the whole record, and judged k steps ahead the climb adds a curved characteristic, at the
-  // search's bound, to the level; its held-out part fits poorly whatever the model.
+  // on the whole record, and judged k steps ahead the deadband gains +1.8 points on the estimation
+  // part, too little, and ranks above the stiction it nests (which gains less held out), so the
+  // climb stops at `integrator`; its held-out part fits poorly whatever the model.
   const std::string last_model = l["ladder"].back()["model"];
-  CHECK(last_model == "characteristic+integrator");
-  CHECK(l["verdict"] == "other-nonlinearity");
+  CHECK(last_model == "integrator");
+  CHECK(l["verdict"] == "no-valve-problem");
   const std::string reason = l["reason"];
   CHECK(reason.find("`linear` is stable on this record only by force (least squares put its "
                     "poles past the unit circle) and `integrator` fits better, so the climb went "

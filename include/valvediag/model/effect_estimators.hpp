@@ -32,6 +32,10 @@ struct LinearOptions {
   // `integrator`: A has a fixed (1 - q^-1) factor. The ARX part is fitted to the differenced
   // output w = y(t) - y(t-1) and the simulation integrates it back; c is then a ramp rate.
   bool integrating = false;
+  // Integrating: the fit's criterion restarts the simulated level from the measured output every
+  // this many samples (multiple shooting; 0: the whole window is one simulation). The reported
+  // simulation (simulate) always runs through.
+  std::size_t level_anchor = 0;
   // `disturbance`: a slow unmeasured load d(t) in the equation, A y = B x + d + e, with d
   // piecewise linear between knots every `drift_knot_spacing` samples over the estimation data
   // (hat functions; they replace c). d passes through 1/A like a load entering the process.
