@@ -315,7 +315,7 @@ TEST_CASE("sweep over the plant loops: verdict against the provider's labels" *
   std::printf("judged records only (%d of 41): balanced accuracy %.1f %% (sticky found %.1f %%)\n",
               judged("stiction") + judged("no-stiction"), 50 * (found_j + clean_j), 100 * found_j);
   // As measured (README); the issue aims at 85 % with at most 10 % false sticky.
-  CHECK(table["stiction"]["stiction"] >= 13);
+  CHECK(table["stiction"]["stiction"] >= 14);
   CHECK(table["no-stiction"]["stiction"] == 0);
   // The export with duplicate time stamps is refused, naming its line; the sweep goes on.
   CHECK(table["stiction"]["error"] == 1);
