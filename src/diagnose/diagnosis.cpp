@@ -234,6 +234,22 @@ KStepFitness k_step_fitness(const ModelFit& f, const std::vector<double>& y, con
   return r;
 }
 
+// A fit as the step's gains measure it: its simulated output, or with a k-step judge its
+// k-step prediction; the fitness of each part and the estimation samples it covers.
+struct JudgedFit {
+  std::vector<double> output;
+  double estimation = std::numeric_limits<double>::quiet_NaN();
+  double validation = std::numeric_limits<double>::quiet_NaN();
+  std::size_t from = 0, estimation_end = 0;
+};
+JudgedFit judged(const ModelFit& f, const std::vector<double>& y, const KStepJudge& j) {
+  if (j.horizon == 0)
+    return {f.y_sim, f.fitness_percent, f.validation_fitness_percent, f.first_sample,
+            f.estimation_end};
+  KStepFitness k = k_step_fitness(f, y, j);
+  return {std::move(k.output), k.estimation, k.validation, j.from + j.horizon, j.estimation_end};
+}
+
 // Whether a model with `dof` more parameters refutes a narrower one on samples [t0, t1) by the
 // likelihood-ratio test (99 %): fitness is 100 (1 - |e| / |y - mean|) on the same samples, so the
 // ratio of the residual sums of squares is the squared ratio of what each leaves, and the
@@ -288,23 +304,13 @@ std::map<EffectPair, std::string> nested_winners(const std::vector<double>& y, d
           effect_parameter_count(wide, fw, Ts) - effect_parameter_count(narrow, fn, Ts);
       // On the estimation part, or on the held-out part, which neither was fitted to; or held
       // out by the margin any finding must gain to be supported.
-      // Tested on what the gains measure: the simulated output, or the judge's k-step
-      // prediction (an integrating simulation's drift would swamp the difference).
-      if (judge.horizon > 0) {
-        const KStepFitness kn = k_step_fitness(fn, y, judge);
-        const KStepFitness kw = k_step_fitness(fw, y, judge);
-        wider = b.validation_gain_percent - a.validation_gain_percent >= margin ||
-                lr_refutes(y, kn.output, kw.estimation, kn.estimation, judge.from + judge.horizon,
-                           judge.estimation_end, dof) ||
-                lr_refutes(y, kn.output, kw.validation, kn.validation, judge.estimation_end,
-                           y.size(), dof);
-      } else {
-        wider = b.validation_gain_percent - a.validation_gain_percent >= margin ||
-                lr_refutes(y, fn.y_sim, fw.fitness_percent, fn.fitness_percent, fn.first_sample,
-                           fn.estimation_end, dof) ||
-                lr_refutes(y, fn.y_sim, fw.validation_fitness_percent,
-                           fn.validation_fitness_percent, fn.estimation_end, y.size(), dof);
-      }
+      // Tested on what the gains measure (judged): an integrating simulation's drift would
+      // swamp the difference.
+      const JudgedFit jn = judged(fn, y, judge), jw = judged(fw, y, judge);
+      wider =
+          b.validation_gain_percent - a.validation_gain_percent >= margin ||
+          lr_refutes(y, jn.output, jw.estimation, jn.estimation, jn.from, jn.estimation_end, dof) ||
+          lr_refutes(y, jn.output, jw.validation, jn.validation, jn.estimation_end, y.size(), dof);
     }
     const std::string winner = wider ? wide : narrow;
     out[{narrow, wide}] = winner;
@@ -517,16 +523,10 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
         const ModelFit& pt = fits[static_cast<std::size_t>(pr - step.findings.data())];
         const double dof = effect_parameter_count("preisach", pt, Ts) -
                            (over_trial ? effect_parameter_count(nf.effect, nt, Ts) : 0.0);
-        if (step.judge.horizon > 0) {  // on what the gains measure, as nested_winners
-          const KStepFitness kr = k_step_fitness(ref, y, step.judge);
-          const KStepFitness kp = k_step_fitness(pt, y, step.judge);
-          lr_passes =
-              lr_refutes(y, kr.output, kp.estimation, kr.estimation,
-                         step.judge.from + step.judge.horizon, step.judge.estimation_end, dof);
-        } else {
-          lr_passes = lr_refutes(y, ref.y_sim, pr->trial_fitness_percent, ref.fitness_percent,
-                                 ref.first_sample, ref.estimation_end, dof);
-        }
+        // On what the gains measure, as nested_winners.
+        const JudgedFit jr = judged(ref, y, step.judge), jp = judged(pt, y, step.judge);
+        lr_passes =
+            lr_refutes(y, jr.output, jp.estimation, jr.estimation, jr.from, jr.estimation_end, dof);
       }
       pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent &&
                       beyond > 0 && lr_passes;
