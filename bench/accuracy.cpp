@@ -57,10 +57,11 @@ std::string case_line(const BenchmarkOutcome& o) {
                      : o.top_two           ? "top2"
                                            : "miss";
   return strprintf(
-      "%7llu %-15s %-22s start %-22s %-5s gain %+7.1f (held out %+8.1f) | %s |%s | %.1f s%s\n",
+      "%7llu %-15s %-22s start %-22s %-5s gain %+7.1f (held out %+8.1f) | %s |%s | %.1f s%s |%s\n",
       static_cast<unsigned long long>(o.loop.seed), o.loop.category.c_str(), hidden.c_str(),
       o.loop.start_model.c_str(), mark, o.true_gain, o.true_validation_gain, ranked.c_str(),
-      errs.c_str(), o.seconds, o.error.empty() ? "" : (" ERROR " + o.error).c_str());
+      errs.c_str(), o.seconds, o.error.empty() ? "" : (" ERROR " + o.error).c_str(),
+      o.detail.c_str());
 }
 
 std::vector<BenchmarkOutcome> run_range(const Range& r, const std::string& only, int jobs,

@@ -11,6 +11,7 @@
 
 #include "valvediag/core/autocorrelation.hpp"
 #include "valvediag/diagnose/pairwise_ranking.hpp"
+#include "valvediag/diagnose/prediction_error.hpp"
 #include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
@@ -428,9 +429,41 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       base_score = m.estimation;
     }
   }
+  // One-step prediction errors (prediction_error.hpp): each fit's valve position and dead time
+  // in one ARX structure of order 12, on the samples every fit covers. A high order stands for
+  // the noise model the direct method needs (measured, development seed 48: from order 8 on the
+  // true valve position predicts PV better than OP; at 4 the two tie, OP's integral of the past
+  // error standing in for the load a short model cannot carry).
+  constexpr std::size_t kPredictionOrder = 12;
+  std::size_t pe_from = step.fit.first_sample;
+  std::size_t max_nk = static_cast<std::size_t>(std::max(0, step.fit.structure.nk));
+  for (const auto& t : fits) {
+    pe_from = std::max(pe_from, t.first_sample);
+    max_nk = std::max(max_nk, static_cast<std::size_t>(std::max(0, t.structure.nk)));
+  }
+  const std::size_t pe_start = pe_from + max_nk + kPredictionOrder;
+  auto prediction_of = [&](const ModelFit& f) {
+    if (f.x_hat.size() != y.size() || f.estimation_end != step.fit.estimation_end)
+      return PredictionError{};
+    return arx_prediction_error(y, f.x_hat, static_cast<std::size_t>(std::max(0, f.structure.nk)),
+                                kPredictionOrder, pe_start, f.estimation_end);
+  };
+  const PredictionError pe_model = prediction_of(step.fit);
   for (std::size_t i = 0; i < fits.size(); ++i) {
     const ModelFit& t = fits[i];
     Finding f;
+    if (pe_model.ok) {
+      const PredictionError pe = prediction_of(t);
+      const PredictionGain g = prediction_gain(pe, pe_model);
+      f.prediction_estimation_gain_percent = g.estimation;
+      f.prediction_validation_gain_percent = g.validation;
+      if (pe.ok) {
+        const double n = static_cast<double>(pe.estimation_samples);
+        f.prediction_bic_change =
+            n * std::log(pe.estimation_variance / pe_model.estimation_variance) +
+            effect_parameter_count(names[i], t, Ts) * std::log(n);
+      }
+    }
     f.effect = names[i];
     f.trial_spec = trials[i];
     f.trial_fitness_percent = t.fitness_percent;
@@ -559,10 +592,33 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     return (is_memory_effect(a) && b == "disturbance") ||
            (is_memory_effect(b) && a == "disturbance");
   };
-  const auto ranks_above = [margin, base_score, &size, &mutual, &wider_wins](const Finding& a,
-                                                                             const Finding& b) {
+  // Between two effects on the path from OP to PV (the valve's, a dead time, a lag), the one
+  // whose valve position and dead time predict PV one step ahead better, its parameters counted
+  // (prediction_bic_change), ranks first when one predicts clearly better than the model and
+  // the two differ clearly. Simulated output cannot rank them in closed loop: OP carries the
+  // load through the controller, so a wrong process model can track PV better than the true one
+  // (measured: the true valve position, fed to the same estimator, fitted a regulatory loop's
+  // held-out PV at 38 % where OP alone fitted 61 %). Not `disturbance` or `integrator`: the
+  // prediction carries a load and a level from PV's own past, so their trials gain nothing
+  // there by construction. Not between two valves with memory either: they nest (preisach >
+  // stiction > deadband), and the nested models' tests rank them.
+  // Clearly: "positive" evidence on Kass and Raftery's scale of BIC differences (2 ln of the
+  // Bayes factor); below it the two predictions do not tell the models apart.
+  constexpr double kPositiveBic = 2.0;
+  const auto input_path = [](const std::string& e) {
+    const EffectInfo* info = find_effect(e);
+    return (info && info->stage == EffectStage::Valve) || e == "delay" || e == "order";
+  };
+  const auto ranks_above = [margin, base_score, &size, &mutual, &wider_wins, &input_path](
+                               const Finding& a, const Finding& b) {
     if (const auto it = wider_wins.find({a.effect, b.effect}); it != wider_wins.end())
       return it->second == a.effect;
+    if (input_path(a.effect) && input_path(b.effect) &&
+        !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) &&
+        std::isfinite(a.prediction_bic_change) && std::isfinite(b.prediction_bic_change) &&
+        std::min(a.prediction_bic_change, b.prediction_bic_change) <= -kPositiveBic &&
+        std::abs(a.prediction_bic_change - b.prediction_bic_change) > kPositiveBic)
+      return a.prediction_bic_change < b.prediction_bic_change;
     const double hi = std::max(a.gain_percent, b.gain_percent);
     const double lo = std::min(a.gain_percent, b.gain_percent);
     const double left = std::max(100.0 - base_score - lo, 0.0);

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "number_format.hpp"
+#include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
 
@@ -58,16 +59,20 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
       << num(s.residual.noise_level, 3) << "\n";
   if (const std::string jn = judge_note(s); !jn.empty()) o << "judge:     " << jn << "\n";
   // The order is rank_by_wins' (diagnosis.cpp), not the score's: say what it is.
-  o << "findings (most likely missing first: a clearly larger gain on both parts, else fewer "
-       "parameters, else the higher score):\n";
-  o << "  rank  effect          score  gain (val / est)      evidence\n";
+  o << "findings (most likely missing first: between valve and process-lag effects the better "
+       "one-step prediction (PE BIC) when either predicts better than the model; else a clearly "
+       "larger gain on both parts, else fewer parameters, else the higher score):\n";
+  o << "  rank  effect          score  gain (val / est)    PE BIC    evidence\n";
   int rank = 0;
   for (const auto& f : s.findings) {
     char line[256];
-    std::snprintf(line, sizeof line, "  %-4d  %-14s  %5.2f  %+7.2f / %+7.2f    %s %s\n", ++rank,
-                  f.effect.c_str(), f.score, f.validation_gain_percent, f.estimation_gain_percent,
-                  f.evidence_test.empty() ? "-" : f.evidence_test.c_str(),
-                  f.evidence_test.empty() ? "" : num(f.evidence).c_str());
+    std::snprintf(
+        line, sizeof line, "  %-4d  %-14s  %5.2f  %+7.2f / %+7.2f  %8s    %s %s\n", ++rank,
+        f.effect.c_str(), f.score, f.validation_gain_percent, f.estimation_gain_percent,
+        std::isfinite(f.prediction_bic_change) ? strprintf("%+.0f", f.prediction_bic_change).c_str()
+                                               : "-",
+        f.evidence_test.empty() ? "-" : f.evidence_test.c_str(),
+        f.evidence_test.empty() ? "" : num(f.evidence).c_str());
     o << line;
   }
   for (const auto& f : s.findings)
@@ -255,21 +260,25 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
           {{"kind", g.kind}, {"label", g.label}, {"share", g.share}, {"excess", g.excess}});
     json p = json::object();
     for (const auto& v : f.parameters) p[v.name] = v.value;
-    findings.push_back({{"effect", f.effect},
-                        {"score", f.score},
-                        {"validation_gain_percent", num_json(f.validation_gain_percent)},
-                        {"estimation_gain_percent", num_json(f.estimation_gain_percent)},
-                        {"gain_percent", num_json(f.gain_percent)},
-                        {"held_valve_validation_fitness_percent",
-                         num_json(f.held_valve_validation_fitness_percent)},
-                        {"evidence", f.evidence},
-                        {"evidence_test", f.evidence_test},
-                        {"parameters", p},
-                        {"where", where},
-                        {"explanation", f.explanation},
-                        {"supported", f.supported},
-                        {"indistinguishable_from", f.indistinguishable_from},
-                        {"trial_model", to_string(f.trial_spec)}});
+    findings.push_back(
+        {{"effect", f.effect},
+         {"score", f.score},
+         {"validation_gain_percent", num_json(f.validation_gain_percent)},
+         {"estimation_gain_percent", num_json(f.estimation_gain_percent)},
+         {"gain_percent", num_json(f.gain_percent)},
+         {"prediction_estimation_gain_percent", num_json(f.prediction_estimation_gain_percent)},
+         {"prediction_validation_gain_percent", num_json(f.prediction_validation_gain_percent)},
+         {"prediction_bic_change", num_json(f.prediction_bic_change)},
+         {"held_valve_validation_fitness_percent",
+          num_json(f.held_valve_validation_fitness_percent)},
+         {"evidence", f.evidence},
+         {"evidence_test", f.evidence_test},
+         {"parameters", p},
+         {"where", where},
+         {"explanation", f.explanation},
+         {"supported", f.supported},
+         {"indistinguishable_from", f.indistinguishable_from},
+         {"trial_model", to_string(f.trial_spec)}});
   }
   j["findings"] = findings;
   j["judge"] = {

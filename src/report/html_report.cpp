@@ -1030,13 +1030,18 @@ void diagnosis_section(std::ostringstream& o, const ReportContent& c) {
   if (const std::string jn = judge_note(s); !jn.empty()) o << "<p>Judge: " << e(jn) << ".</p>\n";
   o << "<table id=\"findings\"><tr><th>rank</th><th>effect</th><th>score</th>"
        "<th>gain, validation / estimation "
-       "(points)</th><th>evidence</th><th>explanation</th></tr>\n";
+       "(points)</th><th title=\"change of BIC of the one-step prediction of PV from the trial's "
+       "valve position and dead time; negative: it predicts better than the model\">"
+       "prediction BIC</th><th>evidence</th><th>explanation</th></tr>\n";
   int rank = 0;
   for (const auto& f : s.findings) {
     o << "<tr" << (f.supported ? " style=\"font-weight:bold\"" : "") << "><td class=\"num\">"
       << ++rank << "</td><td>" << e(f.effect) << "</td><td class=\"num\">" << e(num(f.score, 2))
       << "</td><td class=\"num\">" << e(signed_num(f.validation_gain_percent)) << " / "
-      << e(signed_num(f.estimation_gain_percent)) << "</td><td>"
+      << e(signed_num(f.estimation_gain_percent)) << "</td><td class=\"num\">"
+      << e(std::isfinite(f.prediction_bic_change) ? signed_num(f.prediction_bic_change, 0)
+                                                  : std::string("-"))
+      << "</td><td>"
       << e(f.evidence_test.empty() ? "-" : f.evidence_test + " " + num(f.evidence, 2))
       << "</td><td>" << e(f.explanation);
     if (!f.parameters.empty())

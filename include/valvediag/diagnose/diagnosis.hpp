@@ -31,6 +31,13 @@ struct Finding {
   // not scored: a stuck valve that does not slip in the held-out part holds PV as a compensated
   // load does (see held_valve_note).
   double held_valve_validation_fitness_percent = std::numeric_limits<double>::quiet_NaN();
+  // One-step prediction of PV from the trial's valve position and dead time against the model's
+  // (prediction_error.hpp, one ARX order for both): how much less error the trial leaves, % of
+  // the model's RMS, on each part; and the change of BIC on the estimation part, the effect's
+  // parameters counted (negative: the trial predicts PV better than its parameters cost).
+  double prediction_estimation_gain_percent = std::numeric_limits<double>::quiet_NaN();
+  double prediction_validation_gain_percent = std::numeric_limits<double>::quiet_NaN();
+  double prediction_bic_change = std::numeric_limits<double>::quiet_NaN();
   bool supported = false;                   // score and gain clear DiagnoseOptions' thresholds
   double evidence = 0.0;                    // strongest residual test pointing to it, 0..1
   std::string evidence_test;                // that test's name

@@ -1,0 +1,41 @@
+#pragma once
+// One-step-ahead prediction error of PV given a model's valve position: the judge between effects
+// on the path from OP to PV. Simulated output compares models by how well G x alone tracks PV;
+// in closed loop OP carries the load through the controller, so a wrong G can track PV better
+// than the true one. The prediction error of a flexible linear model from the same valve
+// position (a high-order ARX, which stands for any noise model) is least for the true valve and
+// dead time: the direct prediction-error method is consistent in closed loop (Ljung, System
+// Identification, 13.4).
+#include <cstddef>
+#include <limits>
+#include <vector>
+
+namespace valvediag {
+
+struct PredictionError {
+  bool ok = false;
+  std::size_t order = 0;  // na = nb of the ARX structure
+  // Mean squared one-step prediction error on each part; the held-out part's with the
+  // coefficients fitted on the estimation part.
+  double estimation_variance = std::numeric_limits<double>::quiet_NaN();
+  double validation_variance = std::numeric_limits<double>::quiet_NaN();
+  std::size_t estimation_samples = 0, validation_samples = 0;
+};
+
+// PV predicted one step ahead from its own past and the valve position x: an ARX structure of
+// `order` (A and B of that order, B's taps from x(t - nk - 1) on, and a constant) fitted by least
+// squares, its prediction-error fit, on [from, estimation_end), scored there and on
+// [estimation_end, N). Needs from >= nk + order; not ok on too few samples or non-finite data.
+PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
+                                     std::size_t nk, std::size_t order, std::size_t from,
+                                     std::size_t estimation_end);
+
+// How much less one-step prediction error a model leaves than a reference: 100 (1 - rms/rms_ref)
+// on the estimation and on the held-out part (NaN where either has none).
+struct PredictionGain {
+  double estimation = std::numeric_limits<double>::quiet_NaN();
+  double validation = std::numeric_limits<double>::quiet_NaN();
+};
+PredictionGain prediction_gain(const PredictionError& model, const PredictionError& reference);
+
+}  // namespace valvediag

@@ -1,0 +1,70 @@
+#include "valvediag/diagnose/prediction_error.hpp"
+
+#include <Eigen/Dense>
+#include <cmath>
+
+namespace valvediag {
+
+PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
+                                     std::size_t nk, std::size_t order, std::size_t from,
+                                     std::size_t estimation_end) {
+  PredictionError out;
+  const std::size_t N = y.size();
+  if (x.size() != N || estimation_end > N || order == 0) return out;
+  if (from < nk + order) return out;
+  const std::size_t cols = 2 * order + 1;
+  if (estimation_end <= from + 4 * cols) return out;
+  auto row = [&](std::size_t t, double* r) {
+    for (std::size_t i = 0; i < order; ++i) r[i] = y[t - 1 - i];
+    for (std::size_t i = 0; i < order; ++i) r[order + i] = x[t - nk - 1 - i];
+    r[2 * order] = 1.0;
+  };
+  // The normal equations, accumulated row by row: memory stays that of the coefficients
+  // however long the record.
+  const auto P = static_cast<Eigen::Index>(cols);
+  Eigen::MatrixXd G = Eigen::MatrixXd::Zero(P, P);
+  Eigen::VectorXd h = Eigen::VectorXd::Zero(P);
+  std::vector<double> r(cols);
+  for (std::size_t t = from; t < estimation_end; ++t) {
+    row(t, r.data());
+    const Eigen::Map<const Eigen::VectorXd> v(r.data(), P);
+    G.selfadjointView<Eigen::Lower>().rankUpdate(v);
+    h += y[t] * v;
+  }
+  G = G.selfadjointView<Eigen::Lower>();
+  if (!G.allFinite() || !h.allFinite()) return out;
+  const Eigen::VectorXd theta = G.colPivHouseholderQr().solve(h);
+  if (!theta.allFinite()) return out;
+  auto mse = [&](std::size_t a, std::size_t e, std::size_t& count) {
+    double s = 0.0;
+    count = 0;
+    for (std::size_t t = a; t < e; ++t) {
+      row(t, r.data());
+      double p = 0.0;
+      for (std::size_t i = 0; i < cols; ++i) p += theta(static_cast<Eigen::Index>(i)) * r[i];
+      s += (y[t] - p) * (y[t] - p);
+      ++count;
+    }
+    return count > 0 ? s / static_cast<double>(count) : std::numeric_limits<double>::quiet_NaN();
+  };
+  out.order = order;
+  out.estimation_variance = mse(from, estimation_end, out.estimation_samples);
+  if (estimation_end + 1 < N)
+    out.validation_variance = mse(estimation_end, N, out.validation_samples);
+  out.ok = std::isfinite(out.estimation_variance) && out.estimation_variance > 0;
+  return out;
+}
+
+PredictionGain prediction_gain(const PredictionError& model, const PredictionError& reference) {
+  PredictionGain g;
+  if (!model.ok || !reference.ok) return g;
+  auto gain = [](double v, double ref) {
+    return v >= 0 && ref > 0 ? 100.0 * (1.0 - std::sqrt(v / ref))
+                             : std::numeric_limits<double>::quiet_NaN();
+  };
+  g.estimation = gain(model.estimation_variance, reference.estimation_variance);
+  g.validation = gain(model.validation_variance, reference.validation_variance);
+  return g;
+}
+
+}  // namespace valvediag
