@@ -601,7 +601,9 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // held-out PV at 38 % where OP alone fitted 61 %). Not `disturbance` or `integrator`: the
   // prediction carries a load and a level from PV's own past, so their trials gain nothing
   // there by construction. Not between two valves with memory either: they nest (preisach >
-  // stiction > deadband), and the nested models' tests rank them.
+  // stiction > deadband), and the nested models' tests rank them. Nor between a supported
+  // finding and one that is not: the prediction ranks findings the gains leave equal, it does
+  // not overturn the gains' test.
   // Clearly: "positive" evidence on Kass and Raftery's scale of BIC differences (2 ln of the
   // Bayes factor); below it the two predictions do not tell the models apart.
   constexpr double kPositiveBic = 2.0;
@@ -614,7 +616,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     if (const auto it = wider_wins.find({a.effect, b.effect}); it != wider_wins.end())
       return it->second == a.effect;
     if (input_path(a.effect) && input_path(b.effect) &&
-        !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) &&
+        !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported == b.supported &&
         std::isfinite(a.prediction_bic_change) && std::isfinite(b.prediction_bic_change) &&
         std::min(a.prediction_bic_change, b.prediction_bic_change) <= -kPositiveBic &&
         std::abs(a.prediction_bic_change - b.prediction_bic_change) > kPositiveBic)
