@@ -59,9 +59,9 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
       << num(s.residual.noise_level, 3) << "\n";
   if (const std::string jn = judge_note(s); !jn.empty()) o << "judge:     " << jn << "\n";
   // The order is rank_by_wins' (diagnosis.cpp), not the score's: say what it is.
-  o << "findings (most likely missing first: between valve and process-lag effects the better "
-       "one-step prediction (PE BIC) when either predicts better than the model; else a clearly "
-       "larger gain on both parts, else fewer parameters, else the higher score):\n";
+  o << "findings (most likely missing first: between valve and process-lag effects alike "
+       "supported, the clearly better one-step prediction of PV (PE BIC); else a clearly larger "
+       "gain on both parts, else fewer parameters, else the higher score):\n";
   o << "  rank  effect          score  gain (val / est)    PE BIC    evidence\n";
   int rank = 0;
   for (const auto& f : s.findings) {
