@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <map>
 #include <optional>
@@ -10,8 +11,10 @@
 #include <utility>
 
 #include "valvediag/core/autocorrelation.hpp"
+#include "valvediag/core/parallel_for.hpp"
 #include "valvediag/diagnose/pairwise_ranking.hpp"
 #include "valvediag/diagnose/prediction_error.hpp"
+#include "valvediag/diagnose/prediction_refit.hpp"
 #include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
@@ -281,6 +284,7 @@ std::map<EffectPair, std::string> nested_winners(const std::vector<double>& y, d
                                                  const std::vector<std::string>& names,
                                                  const std::vector<ModelFit>& fits,
                                                  const std::vector<Finding>& findings,
+                                                 const std::vector<PredictionError>& predictions,
                                                  double margin, const KStepJudge& judge) {
   std::map<EffectPair, std::string> out;
   auto index = [&names](const char* e) {
@@ -312,6 +316,21 @@ std::map<EffectPair, std::string> nested_winners(const std::vector<double>& y, d
           b.validation_gain_percent - a.validation_gain_percent >= margin ||
           lr_refutes(y, jn.output, jw.estimation, jn.estimation, jn.from, jn.estimation_end, dof) ||
           lr_refutes(y, jn.output, jw.validation, jn.validation, jn.estimation_end, y.size(), dof);
+    }
+    // Or on the one-step prediction of PV, each at its parameters refitted to it: the same
+    // test on the estimation part's prediction errors (their samples are the residual's own:
+    // white where the predictor fits), the held-out part's no worse. In closed loop the
+    // simulated output can leave a friction's jump unseen that the prediction sees.
+    if (!wider && n < predictions.size() && w < predictions.size() && predictions[n].ok &&
+        predictions[w].ok &&
+        predictions[w].estimation_samples == predictions[n].estimation_samples &&
+        !(predictions[w].validation_variance > predictions[n].validation_variance)) {
+      const double dof = std::max(
+          1.0, effect_parameter_count(wide, fw, Ts) - effect_parameter_count(narrow, fn, Ts));
+      const double lr =
+          static_cast<double>(predictions[n].estimation_samples) *
+          std::log(predictions[n].estimation_variance / predictions[w].estimation_variance);
+      wider = lr > chi_square_quantile_99(dof);
     }
     const std::string winner = wider ? wide : narrow;
     out[{narrow, wide}] = winner;
@@ -381,13 +400,16 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   if (model.has("delay") && fo.delay_nk_max <= 0 && step.fit.structure.nk >= 0)
     to.delay_nk_max = 2 * step.fit.structure.nk + fo.structure.nk_max;
   auto fits = fit_models(u, y, Ts, trials, to);
+  // The variants that lose on simulated output stay candidates of the prediction refit below.
+  std::vector<std::pair<std::size_t, ModelFit>> other_variants;
   for (std::size_t j = 0; j < variant_of.size(); ++j) {
     ModelFit& alt = fits[n_main + j];
     const std::size_t i = variant_of[j];
     if (finite_or(alt.fitness_percent, -1e9) > finite_or(fits[i].fitness_percent, -1e9)) {
-      fits[i] = std::move(alt);
+      std::swap(fits[i], alt);
       trials[i] = trials[n_main + j];
     }
+    other_variants.emplace_back(i, std::move(alt));
   }
   fits.resize(n_main);
   trials.resize(n_main);
@@ -435,25 +457,70 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // true valve position predicts PV better than OP; at 4 the two tie, OP's integral of the past
   // error standing in for the load a short model cannot carry).
   constexpr std::size_t kPredictionOrder = 12;
+  // Each fit's dead time is profiled out over the range its structure allows (the base grid's,
+  // or up to its own when longer: a `delay`): fitted to simulated output, a model's nk can sit a
+  // few samples off the one that predicts best (measured: a linear loop's model at nk 7 and its
+  // trials at 6 differed by 190 in BIC where the predictor's best nk, 4, tied them).
+  const auto nk_range = [&fo](const ModelFit& f) {
+    return static_cast<std::size_t>(std::max({0, f.structure.nk, fo.structure.nk_max}));
+  };
   std::size_t pe_from = step.fit.first_sample;
-  std::size_t max_nk = static_cast<std::size_t>(std::max(0, step.fit.structure.nk));
+  std::size_t max_nk = nk_range(step.fit);
   for (const auto& t : fits) {
     pe_from = std::max(pe_from, t.first_sample);
-    max_nk = std::max(max_nk, static_cast<std::size_t>(std::max(0, t.structure.nk)));
+    max_nk = std::max(max_nk, nk_range(t));
+  }
+  for (const auto& [i, t] : other_variants) {
+    pe_from = std::max(pe_from, t.first_sample);
+    max_nk = std::max(max_nk, nk_range(t));
   }
   const std::size_t pe_start = pe_from + max_nk + kPredictionOrder;
   auto prediction_of = [&](const ModelFit& f) {
     if (f.x_hat.size() != y.size() || f.estimation_end != step.fit.estimation_end)
       return PredictionError{};
-    return arx_prediction_error(y, f.x_hat, static_cast<std::size_t>(std::max(0, f.structure.nk)),
-                                kPredictionOrder, pe_start, f.estimation_end);
+    return best_arx_prediction_error(y, f.x_hat, nk_range(f), kPredictionOrder, pe_start,
+                                     f.estimation_end);
   };
   const PredictionError pe_model = prediction_of(step.fit);
+  // A valve effect or an extra lag is scored on the prediction at its parameters refitted to it
+  // (the simulated output's fit can miss the effect in closed loop: prediction_refit.hpp); the
+  // actuator's lag and the process's alike, as they commute on a linear valve. Not the
+  // Preisach plane (no coordinates) nor its position-dependent friction (six).
+  // Each stiction variant is refitted (the simulated output chose one; the prediction may
+  // prefer another's friction), the best prediction kept.
+  std::vector<std::pair<std::size_t, const ModelFit*>> jobs;
+  for (std::size_t i = 0; i < fits.size(); ++i) jobs.emplace_back(i, &fits[i]);
+  for (const auto& [i, alt] : other_variants) jobs.emplace_back(i, &alt);
+  std::vector<PredictionRefit> refits(fits.size()), job_refits(jobs.size());
+  if (pe_model.ok) {
+    parallel_for(jobs.size(), worker_count(fo.threads, jobs.size()), [&](unsigned, std::size_t j) {
+      const auto [i, f] = jobs[j];
+      const EffectInfo* info = find_effect(names[i]);
+      const bool lag_or_valve = (info && info->stage == EffectStage::Valve) || names[i] == "order";
+      if (!lag_or_valve || names[i] == "preisach" || f->estimation_end != step.fit.estimation_end)
+        return;
+      PredictionRefitOptions po;
+      po.order = kPredictionOrder;
+      po.nk_max = nk_range(*f);
+      po.from = pe_start;
+      po.estimation_end = step.fit.estimation_end;
+      job_refits[j] = refit_by_prediction(u, y, Ts, *f, names[i], po);
+    });
+    for (std::size_t j = 0; j < jobs.size(); ++j) {
+      PredictionRefit& r = refits[jobs[j].first];
+      if (job_refits[j].ok &&
+          (!r.ok || job_refits[j].error.estimation_variance < r.error.estimation_variance))
+        r = std::move(job_refits[j]);
+    }
+  }
+  std::vector<PredictionError> predictions(fits.size());
   for (std::size_t i = 0; i < fits.size(); ++i) {
     const ModelFit& t = fits[i];
     Finding f;
     if (pe_model.ok) {
-      const PredictionError pe = prediction_of(t);
+      const PredictionError pe = refits[i].ok ? refits[i].error : prediction_of(t);
+      predictions[i] = pe;
+      if (refits[i].ok && refits[i].moved) f.prediction_parameters = refits[i].parameters;
       const PredictionGain g = prediction_gain(pe, pe_model);
       f.prediction_estimation_gain_percent = g.estimation;
       f.prediction_validation_gain_percent = g.validation;
@@ -587,7 +654,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // least as well, would win every near tie (measured: deadbands named stiction on an
   // estimation gain 0.02-0.5 points larger).
   const std::map<EffectPair, std::string> wider_wins =
-      nested_winners(y, Ts, names, fits, step.findings, margin, step.judge);
+      nested_winners(y, Ts, names, fits, step.findings, predictions, margin, step.judge);
   auto mutual = [](const std::string& a, const std::string& b) {
     return (is_memory_effect(a) && b == "disturbance") ||
            (is_memory_effect(b) && a == "disturbance");
@@ -619,8 +686,18 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
         !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported == b.supported &&
         std::isfinite(a.prediction_bic_change) && std::isfinite(b.prediction_bic_change) &&
         std::min(a.prediction_bic_change, b.prediction_bic_change) <= -kPositiveBic &&
-        std::abs(a.prediction_bic_change - b.prediction_bic_change) > kPositiveBic)
-      return a.prediction_bic_change < b.prediction_bic_change;
+        std::abs(a.prediction_bic_change - b.prediction_bic_change) > kPositiveBic) {
+      // Confirmed on the held-out part, which neither prediction was fitted to: the better one
+      // there too, and better than the model. A search over a rugged friction landscape can buy
+      // a BIC it does not keep (measured: a linear loop under a slow outside cycle, friction
+      // refitted to -14 in BIC, predicted the held-out part 0.8 % worse than the model).
+      const Finding& better = a.prediction_bic_change < b.prediction_bic_change ? a : b;
+      const Finding& worse = a.prediction_bic_change < b.prediction_bic_change ? b : a;
+      const double bv = better.prediction_validation_gain_percent;
+      const double wv = worse.prediction_validation_gain_percent;
+      if (!std::isfinite(bv) || !std::isfinite(wv) || (bv > 0 && bv > wv))
+        return a.prediction_bic_change < b.prediction_bic_change;
+    }
     const double hi = std::max(a.gain_percent, b.gain_percent);
     const double lo = std::min(a.gain_percent, b.gain_percent);
     const double left = std::max(100.0 - base_score - lo, 0.0);
@@ -669,6 +746,13 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       b.indistinguishable_from = a.effect;
     }
   }
+  // A trial with no stable fit ranked last on a gain below any other; it has none to report.
+  for (auto& f : step.findings)
+    if (!std::isfinite(f.trial_fitness_percent)) {
+      f.estimation_gain_percent = std::numeric_limits<double>::quiet_NaN();
+      f.validation_gain_percent = std::numeric_limits<double>::quiet_NaN();
+      f.gain_percent = std::numeric_limits<double>::quiet_NaN();
+    }
   return step;
 }
 

@@ -25,11 +25,18 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(P, P);
   Eigen::VectorXd h = Eigen::VectorXd::Zero(P);
   std::vector<double> r(cols);
+  // Plain loops on the lower triangle: for a row of 25, Eigen's dynamic-size rankUpdate spent
+  // more in its call than in the sums.
+  double* g = G.data();
+  double* hv = h.data();
   for (std::size_t t = from; t < estimation_end; ++t) {
     row(t, r.data());
-    const Eigen::Map<const Eigen::VectorXd> v(r.data(), P);
-    G.selfadjointView<Eigen::Lower>().rankUpdate(v);
-    h += y[t] * v;
+    for (std::size_t j = 0; j < cols; ++j) {
+      const double rj = r[j];
+      double* gj = g + j * cols;
+      for (std::size_t i = j; i < cols; ++i) gj[i] += rj * r[i];
+      hv[j] += y[t] * rj;
+    }
   }
   G = G.selfadjointView<Eigen::Lower>();
   if (!G.allFinite() || !h.allFinite()) return out;
@@ -48,11 +55,25 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
     return count > 0 ? s / static_cast<double>(count) : std::numeric_limits<double>::quiet_NaN();
   };
   out.order = order;
+  out.nk = nk;
   out.estimation_variance = mse(from, estimation_end, out.estimation_samples);
   if (estimation_end + 1 < N)
     out.validation_variance = mse(estimation_end, N, out.validation_samples);
   out.ok = std::isfinite(out.estimation_variance) && out.estimation_variance > 0;
   return out;
+}
+
+PredictionError best_arx_prediction_error(const std::vector<double>& y,
+                                          const std::vector<double>& x, std::size_t nk_max,
+                                          std::size_t order, std::size_t from,
+                                          std::size_t estimation_end) {
+  PredictionError best;
+  if (from < nk_max + order) return best;  // every dead time on the same samples
+  for (std::size_t nk = 0; nk <= nk_max; ++nk) {
+    PredictionError p = arx_prediction_error(y, x, nk, order, from, estimation_end);
+    if (p.ok && (!best.ok || p.estimation_variance < best.estimation_variance)) best = p;
+  }
+  return best;
 }
 
 PredictionGain prediction_gain(const PredictionError& model, const PredictionError& reference) {

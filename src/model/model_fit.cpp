@@ -119,25 +119,11 @@ struct Search {
   }
   double cost(const double* za) {
     ++evaluations;
-    std::vector<double> z = full(za);
-    std::size_t combos = 1;
-    for (std::size_t p : profiled) combos *= static_cast<std::size_t>(coords[p].profile_points);
-    double c = std::numeric_limits<double>::infinity();
-    std::vector<double> zc;
-    for (std::size_t k = 0; k < combos; ++k) {
-      std::size_t r = k;
-      for (std::size_t p : profiled) {
-        const auto n = static_cast<std::size_t>(coords[p].profile_points);
-        z[p] = n > 1 ? static_cast<double>(r % n) / static_cast<double>(n - 1) : 0.5;
-        r /= n;
-      }
+    std::vector<double> zc = full(za);
+    const double c = profile_minimum(coords, profiled, zc, [this](const std::vector<double>& z) {
       const LinearFit f = est.fit(valve_position(z.data()));
-      const double ck = f.ok ? f.sse : penalty;
-      if (ck < c) {
-        c = ck;
-        zc = z;
-      }
-    }
+      return f.ok ? f.sse : penalty;
+    });
     std::lock_guard<std::mutex> lock(mtx);
     if (c < best_cost) {
       best_cost = c;
@@ -476,17 +462,6 @@ struct Problem {
     s.penalty = 10.0 * den + 1.0;  // fitness about -216 %: worse than any stable fit
     for (std::size_t i = 0; i < s.coords.size(); ++i)
       if (s.coords[i].profile_points > 0) s.profiled.push_back(i);
-  }
-  static InputRange input_range(const std::vector<double>& u, double Ts) {
-    const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
-    std::vector<double> v(u);
-    const auto at = [&v](double q) {  // rank truncated, as the benchmark figures were measured
-      const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(v.size() - 1));
-      std::nth_element(v.begin(), v.begin() + k, v.end());
-      return v[static_cast<std::size_t>(k)];
-    };
-    const double w_lo = at(0.05), w_hi = at(0.95);
-    return {*lo, *hi, Ts, w_lo, w_hi};
   }
   // The valve search scores every candidate with the best linear part over a structure range.
   // `order` and `delay` widen that range; the search scores over the base grid's orders and

@@ -19,6 +19,19 @@ Overload(F...) -> Overload<F...>;
 
 }  // namespace
 
+InputRange input_range(const std::vector<double>& u, double Ts) {
+  if (u.empty()) return {0.0, 0.0, Ts, 0.0, 0.0};
+  const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
+  std::vector<double> v(u);
+  const auto at = [&v](double q) {  // rank truncated, as the benchmark figures were measured
+    const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(v.size() - 1));
+    std::nth_element(v.begin(), v.begin() + k, v.end());
+    return v[static_cast<std::size_t>(k)];
+  };
+  const double w_lo = at(0.05), w_hi = at(0.95);
+  return {*lo, *hi, Ts, w_lo, w_hi};
+}
+
 std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputRange& r) {
   const double R = std::max(r.umax - r.umin, 1e-9);
   if (e.name == "stiction") {

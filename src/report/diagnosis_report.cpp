@@ -66,13 +66,17 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   int rank = 0;
   for (const auto& f : s.findings) {
     char line[256];
-    std::snprintf(
-        line, sizeof line, "  %-4d  %-14s  %5.2f  %+7.2f / %+7.2f  %8s    %s %s\n", ++rank,
-        f.effect.c_str(), f.score, f.validation_gain_percent, f.estimation_gain_percent,
-        std::isfinite(f.prediction_bic_change) ? strprintf("%+.0f", f.prediction_bic_change).c_str()
-                                               : "-",
-        f.evidence_test.empty() ? "-" : f.evidence_test.c_str(),
-        f.evidence_test.empty() ? "" : num(f.evidence).c_str());
+    const std::string gains =
+        std::isfinite(f.trial_fitness_percent)
+            ? strprintf("%+7.2f / %+7.2f", f.validation_gain_percent, f.estimation_gain_percent)
+            : std::string("   no stable fit");
+    std::snprintf(line, sizeof line, "  %-4d  %-14s  %5.2f  %-17s  %8s    %s %s\n", ++rank,
+                  f.effect.c_str(), f.score, gains.c_str(),
+                  std::isfinite(f.prediction_bic_change)
+                      ? strprintf("%+.0f", f.prediction_bic_change).c_str()
+                      : "-",
+                  f.evidence_test.empty() ? "-" : f.evidence_test.c_str(),
+                  f.evidence_test.empty() ? "" : num(f.evidence).c_str());
     o << line;
   }
   for (const auto& f : s.findings)
@@ -84,6 +88,15 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   } else if (!s.findings.empty()) {
     const auto& f = s.findings.front();
     o << "first:     " << f.explanation << "\n";
+    if (!f.prediction_parameters.empty()) {
+      // What ranked it may be the refit (prediction_refit.hpp), not the fit the line above reads.
+      std::string p;
+      for (const auto& v : f.prediction_parameters)
+        p += (p.empty() ? "" : ", ") + v.name + " " + num(v.value, 3) +
+             (v.unit.empty() ? "" : " " + v.unit);
+      o << "           refitted to predict PV one step ahead: " << p << " (PE BIC "
+        << strprintf("%+.0f", f.prediction_bic_change) << ")\n";
+    }
     if (!f.indistinguishable_from.empty())
       o << "           `" << f.effect << "` and `" << f.indistinguishable_from
         << "` explain this data equally well: the data cannot tell them apart\n";
@@ -260,6 +273,8 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
           {{"kind", g.kind}, {"label", g.label}, {"share", g.share}, {"excess", g.excess}});
     json p = json::object();
     for (const auto& v : f.parameters) p[v.name] = v.value;
+    json pp = json::object();
+    for (const auto& v : f.prediction_parameters) pp[v.name] = num_json(v.value);
     findings.push_back(
         {{"effect", f.effect},
          {"score", f.score},
@@ -269,6 +284,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
          {"prediction_estimation_gain_percent", num_json(f.prediction_estimation_gain_percent)},
          {"prediction_validation_gain_percent", num_json(f.prediction_validation_gain_percent)},
          {"prediction_bic_change", num_json(f.prediction_bic_change)},
+         {"prediction_parameters", pp},
          {"held_valve_validation_fitness_percent",
           num_json(f.held_valve_validation_fitness_percent)},
          {"evidence", f.evidence},

@@ -501,3 +501,31 @@ TEST_CASE("between valve and process-lag effects the one-step prediction ranks: 
   CHECK(f[0].prediction_estimation_gain_percent > 0.0);
   CHECK(f[0].prediction_validation_gain_percent > 0.0);
 }
+
+// Development seed 48 of the benchmark: Kano stiction (S 1.97, J 0.48) in a regulatory loop.
+// Fitted to simulated output from OP the friction collapses (a band of 0.003, gaining what a
+// deadband of 0.006 gains: OP's noise filtered), and an actuator lag gained most; refitted to
+// the one-step prediction of PV (prediction_refit.hpp) the friction comes back near S 1.97,
+// predicts PV far better than its two parameters cost, and ranks first, above the lag and above
+// the deadband it nests (the likelihood-ratio test on the prediction errors).
+TEST_CASE("a friction the simulated output misses ranks first on its refitted prediction") {
+  const RandomLoop r = draw_random_loop(48, "stiction");
+  REQUIRE(r.start_model == "linear");
+  const LoopData d = simulate_random_loop(r);
+  const Diagnosis dg = diagnose(d.op, d.pv, d.sample_period(), parse_model_spec("linear"));
+  const auto& f = dg.last().findings;
+  REQUIRE(!f.empty());
+  CHECK(f[0].effect == "stiction");
+  CHECK(f[0].supported);
+  CHECK(f[0].prediction_bic_change < -20.0);
+  CHECK(f[0].prediction_validation_gain_percent > 0.0);
+  double S = std::nan("");
+  for (const auto& p : f[0].prediction_parameters)
+    if (p.name == "S") S = p.value;
+  CHECK(S == doctest::Approx(1.97).epsilon(0.25));
+  for (std::size_t i = 1; i < f.size(); ++i) {
+    INFO(f[i].effect);
+    if (f[i].effect == "deadband" || f[i].effect == "actuator-lag")
+      CHECK(f[i].prediction_bic_change > f[0].prediction_bic_change + 20.0);
+  }
+}

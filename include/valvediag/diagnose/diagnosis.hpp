@@ -38,6 +38,9 @@ struct Finding {
   double prediction_estimation_gain_percent = std::numeric_limits<double>::quiet_NaN();
   double prediction_validation_gain_percent = std::numeric_limits<double>::quiet_NaN();
   double prediction_bic_change = std::numeric_limits<double>::quiet_NaN();
+  // A valve effect's parameters refitted to that prediction (prediction_refit.hpp), which the
+  // three figures above score; empty when the trial's own are scored (no refit).
+  std::vector<NamedValue> prediction_parameters;
   bool supported = false;                   // score and gain clear DiagnoseOptions' thresholds
   double evidence = 0.0;                    // strongest residual test pointing to it, 0..1
   std::string evidence_test;                // that test's name

@@ -15,6 +15,7 @@ namespace valvediag {
 struct PredictionError {
   bool ok = false;
   std::size_t order = 0;  // na = nb of the ARX structure
+  std::size_t nk = 0;     // B's taps from x(t - nk - 1) on
   // Mean squared one-step prediction error on each part; the held-out part's with the
   // coefficients fitted on the estimation part.
   double estimation_variance = std::numeric_limits<double>::quiet_NaN();
@@ -29,6 +30,15 @@ struct PredictionError {
 PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
                                      std::size_t nk, std::size_t order, std::size_t from,
                                      std::size_t estimation_end);
+
+// The same with the dead time profiled out: the nk in [0, nk_max] whose prediction error on
+// the estimation part is least (a model's own dead time, fitted to simulated output, need not
+// be the one that predicts best; comparing two models at their own dead times would compare
+// dead times). Needs from >= nk_max + order.
+PredictionError best_arx_prediction_error(const std::vector<double>& y,
+                                          const std::vector<double>& x, std::size_t nk_max,
+                                          std::size_t order, std::size_t from,
+                                          std::size_t estimation_end);
 
 // How much less one-step prediction error a model leaves than a reference: 100 (1 - rms/rms_ref)
 // on the estimation and on the held-out part (NaN where either has none).

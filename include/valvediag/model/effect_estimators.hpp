@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "valvediag/model/model_spec.hpp"
@@ -153,6 +154,34 @@ struct SearchParameter {
   int profile_points = 0;
 };
 
+// The least of cost(z) over the values of the profiled coordinates (indices into coords; their
+// profile_points evenly spaced over the unit box), the other coordinates as z has them; z is left
+// at the least one's values. cost returns +inf for a point it cannot score.
+template <class Cost>
+double profile_minimum(const std::vector<SearchParameter>& coords,
+                       const std::vector<std::size_t>& profiled, std::vector<double>& z,
+                       Cost&& cost) {
+  std::size_t combos = 1;
+  for (std::size_t p : profiled) combos *= static_cast<std::size_t>(coords[p].profile_points);
+  double best = std::numeric_limits<double>::infinity();
+  std::vector<double> zb = z;
+  for (std::size_t k = 0; k < combos; ++k) {
+    std::size_t r = k;
+    for (std::size_t p : profiled) {
+      const auto n = static_cast<std::size_t>(coords[p].profile_points);
+      z[p] = n > 1 ? static_cast<double>(r % n) / static_cast<double>(n - 1) : 0.5;
+      r /= n;
+    }
+    const double c = cost(z);
+    if (c < best) {
+      best = c;
+      zb = z;
+    }
+  }
+  z = std::move(zb);
+  return best;
+}
+
 // What the data says about the search box: the OP range, the sample period, and the window the
 // valve mostly works in (OP's 5 and 95 % quantiles; both 0: the OP range). Controller transients
 // to 0 or 100 % widen the range, not the window.
@@ -162,6 +191,9 @@ struct InputRange {
   double lo() const { return window_hi > window_lo ? window_lo : umin; }
   double hi() const { return window_hi > window_lo ? window_hi : umax; }
 };
+
+// The input range of OP record u: its extremes and its 5 and 95 % quantiles (rank truncated).
+InputRange input_range(const std::vector<double>& u, double Ts);
 
 // Search coordinates of one valve effect, bounded from the OP range R = umax - umin:
 //   stiction he: fs in [0, R], r = fd/fs in [0, 1] (keeps fs >= fd), and the valve's motion at
