@@ -26,7 +26,10 @@ std::string verdict_basis(const LoopVerdict& v) {
          v.model + "`.";
 }
 
-std::string stiction_text(const FrictionSize& f) {
+namespace {
+
+// The size of the fitted friction (the final model's, the whole-record fit's or the cycle's).
+std::string stiction_fit_text(const FrictionSize& f) {
   if (std::isfinite(f.band_percent) && std::isfinite(f.jump_percent)) {
     std::string s = strprintf("stiction:  %.2f %% of valve travel (He's fs), slip jump %.2f %%",
                               f.band_percent, f.jump_percent);
@@ -44,6 +47,18 @@ std::string stiction_text(const FrictionSize& f) {
     return strprintf("stiction:  %.2f %% of valve travel (apparent, from the limit cycle)\n",
                      f.band_percent);
   return "";
+}
+
+}  // namespace
+
+std::string stiction_text(const FrictionSize& f) {
+  std::string refit;
+  if (std::isfinite(f.prediction_band_percent))
+    refit = strprintf(
+        "           refitted to predict PV one step ahead (what ranked it): %.2f %% of valve "
+        "travel, slip jump %.2f %%\n",
+        f.prediction_band_percent, f.prediction_jump_percent);
+  return stiction_fit_text(f) + refit;
 }
 
 std::string verdict_text(const LoopVerdict& v, bool basis) {
@@ -64,6 +79,8 @@ void add_verdict_json(nlohmann::json& j, const LoopVerdict& v) {
   j["stiction_lo_percent"] = number(v.stiction.band_lo_percent);
   j["stiction_hi_percent"] = number(v.stiction.band_hi_percent);
   j["stiction_hi_open"] = v.stiction.band_hi_open;
+  j["prediction_stiction_percent"] = number(v.stiction.prediction_band_percent);
+  j["prediction_slip_jump_percent"] = number(v.stiction.prediction_jump_percent);
   j["split_check"] = split_check_json(v.split_verdicts);
 }
 

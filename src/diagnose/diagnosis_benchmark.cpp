@@ -23,8 +23,7 @@ double named(const std::vector<NamedValue>& p, const char* name) {
 }
 
 // The fitted figure comparable with a true one (TrueParameter's names and units).
-double estimate_of(const TrueParameter& t, const Finding& f) {
-  const auto& p = f.parameters;
+double estimate_of(const TrueParameter& t, const std::vector<NamedValue>& p) {
   if (t.name == "band") {
     for (const char* n : {"fs", "S", "d"})
       if (const double v = named(p, n); std::isfinite(v)) return v;
@@ -99,7 +98,17 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
             first = false;
           }
           for (const auto& t : loop.truth)
-            if (t.effect == h) o.errors.push_back({h, t.name, t.value, estimate_of(t, x)});
+            if (t.effect == h) {
+              const double est = estimate_of(t, x.parameters);
+              // The effects prediction_refit.hpp refits (diagnosis.cpp), Preisach's aside.
+              const bool refitted = h == "stiction" || h == "deadband" || h == "saturation" ||
+                                    h == "characteristic" || h == "actuator-lag";
+              const double refit = !refitted ? std::nan("")
+                                   : x.prediction_parameters.empty()
+                                       ? est
+                                       : estimate_of(t, x.prediction_parameters);
+              o.errors.push_back({h, t.name, t.value, est, refit});
+            }
         }
       }
       o.gains = o.true_gain >= 2.0;
@@ -115,7 +124,8 @@ namespace {
 
 struct Tally {
   int cases = 0, first = 0, top2 = 0, gains = 0, supported = 0, alarms = 0, errors = 0;
-  std::map<std::string, std::vector<double>> abs_err, rel_err;  // per parameter name
+  std::map<std::string, std::vector<double>> abs_err, rel_err;              // per parameter name
+  std::map<std::string, std::vector<double>> refit_abs_err, refit_rel_err;  // of the refits
   double seconds = 0.0;
   void add(const BenchmarkOutcome& o) {
     ++cases;
@@ -134,6 +144,10 @@ struct Tally {
       abs_err[e.name].push_back(std::abs(e.estimate - e.truth));
       if (e.truth != 0)
         rel_err[e.name].push_back(std::abs(e.estimate - e.truth) / std::abs(e.truth));
+      if (!std::isfinite(e.refit)) continue;
+      refit_abs_err[e.name].push_back(std::abs(e.refit - e.truth));
+      if (e.truth != 0)
+        refit_rel_err[e.name].push_back(std::abs(e.refit - e.truth) / std::abs(e.truth));
     }
   }
 };
@@ -160,10 +174,16 @@ std::map<std::string, Tally> tally(const std::vector<BenchmarkOutcome>& v, Tally
 
 std::string errors_text(const Tally& t) {
   std::string s;
+  const auto rel_median = [](const auto& m, const std::string& name) {
+    const auto it = m.find(name);
+    return it == m.end() || it->second.empty() ? std::nan("") : 100 * median(it->second);
+  };
   for (const auto& [name, v] : t.abs_err) {
-    const auto& rel = t.rel_err.at(name);
     s += strprintf("%s%s: median |err| %.3g (%.0f %%)", s.empty() ? "" : "; ", name.c_str(),
-                   median(v), 100 * median(rel));
+                   median(v), rel_median(t.rel_err, name));
+    if (const auto r = t.refit_abs_err.find(name); r != t.refit_abs_err.end() && !r->second.empty())
+      s += strprintf(", refitted %.3g (%.0f %%)", median(r->second),
+                     rel_median(t.refit_rel_err, name));
   }
   return s;
 }

@@ -82,6 +82,7 @@ json assessment_json(const LoopAssessment& a) {
   j["stiction_lo_percent"] = number(a.stiction_lo_percent);
   j["stiction_hi_percent"] = number(a.stiction_hi_percent);
   j["stiction_hi_open"] = a.stiction_hi_open;
+  j["prediction_stiction_percent"] = number(a.prediction_stiction_percent);
   j["model"] = a.model;
   j["fitness_percent"] = number(a.fitness_percent);
   j["validation_fitness_percent"] = number(a.validation_fitness_percent);
@@ -130,6 +131,7 @@ LoopAssessment assessment_from_json(const json& j) {
   a.slip_jump_percent = number_of(j, "slip_jump_percent");
   a.stiction_lo_percent = number_of(j, "stiction_lo_percent");  // NaN in older results
   a.stiction_hi_percent = number_of(j, "stiction_hi_percent");
+  a.prediction_stiction_percent = number_of(j, "prediction_stiction_percent");  // NaN: older
   a.stiction_hi_open = j.contains("stiction_hi_open") && j["stiction_hi_open"].is_boolean() &&
                        j["stiction_hi_open"].get<bool>();
   a.model = text_of(j, "model");

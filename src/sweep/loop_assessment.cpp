@@ -58,6 +58,7 @@ LoopAssessment assess_loop(const LoopData& d, const std::string& name, const Ass
   a.stiction_lo_percent = v.stiction.band_lo_percent;
   a.stiction_hi_percent = v.stiction.band_hi_percent;
   a.stiction_hi_open = v.stiction.band_hi_open;
+  a.prediction_stiction_percent = v.stiction.prediction_band_percent;
   a.split_verdicts = v.split_verdicts;
   if (v.judged()) {
     const Diagnosis& dg = v.diagnosis;

@@ -4,6 +4,8 @@
 #include <cctype>
 #include <cmath>
 #include <stdexcept>
+#include <string>
+#include <utility>
 
 #include "valvediag/core/stiction_quantification.hpp"
 #include "valvediag/diagnose/valve_travel.hpp"
@@ -21,6 +23,20 @@ double param(const std::vector<NamedValue>& p, const char* name) {
 }
 
 }  // namespace
+
+// A friction effect's band and jump in OP units from its parameters (NaN for other effects).
+std::pair<double, double> band_and_jump(const std::string& effect,
+                                        const std::vector<NamedValue>& p) {
+  constexpr double kNaN = FrictionSize::kNaN;
+  // Position-dependent friction (preisach) gives He's figures where the valve sticks most.
+  if (effect == "stiction" || (effect == "preisach" && !std::isnan(param(p, "fs")))) {
+    if (!std::isnan(param(p, "fs"))) return {param(p, "fs"), param(p, "fs") - param(p, "fd")};
+    if (!std::isnan(param(p, "S"))) return {param(p, "S"), param(p, "J")};
+    return {param(p, "d"), param(p, "d")};
+  }
+  if (effect == "deadband") return {param(p, "d"), 0.0};
+  return {kNaN, kNaN};
+}
 
 // The friction figures of the fitted valve, in OP units: He (fs, fs - fd), Kano (S, J),
 // Stenman (d: band, jump d), deadband (d, no jump), position-dependent friction (He's figures
@@ -52,24 +68,9 @@ FrictionSize friction_size(const ModelFit& fit, const std::vector<double>& op,
   }
   std::string sized;  // the effect the band comes from
   for (const auto& e : fit.effects) {
-    double band = FrictionSize::kNaN, jump = FrictionSize::kNaN;
-    // Position-dependent friction (preisach) gives He's figures where the valve sticks most.
-    if (e.name == "stiction" || (e.name == "preisach" && !std::isnan(param(e.parameters, "fs")))) {
-      if (!std::isnan(param(e.parameters, "fs"))) {
-        band = param(e.parameters, "fs");
-        jump = band - param(e.parameters, "fd");
-      } else if (!std::isnan(param(e.parameters, "S"))) {
-        band = param(e.parameters, "S");
-        jump = param(e.parameters, "J");
-      } else {
-        band = jump = param(e.parameters, "d");
-      }
-    } else if (e.name == "deadband" && std::isnan(a.band_percent)) {
-      band = param(e.parameters, "d");
-      jump = 0.0;
-    } else {
-      continue;
-    }
+    if (e.name == "deadband" && !std::isnan(a.band_percent)) continue;
+    const auto [band, jump] = band_and_jump(e.name, e.parameters);
+    if (std::isnan(band)) continue;
     a.band_percent = 100.0 * band / width;
     a.jump_percent = 100.0 * jump / width;
     a.band_lo_percent = a.band_hi_percent = FrictionSize::kNaN;  // not the Preisach valve's
@@ -107,6 +108,19 @@ FrictionSize friction_size(const Diagnosis& d, const std::vector<double>& op,
   }
   if (std::isnan(a.band_percent) && verdict(d) == "stiction" && d.limit_cycle.stick_slip)
     a.band_percent = 100.0 * d.limit_cycle.apparent_band / std::max(range.hi - range.lo, 1e-12);
+  // The climb adds each step's first finding; a friction of the final model that a refit to the
+  // prediction ranked there carries that refit's figures too.
+  const ModelSpec& final_model = d.last().fit.spec;
+  for (std::size_t k = 0; k + 1 < d.steps.size(); ++k) {
+    if (d.steps[k].findings.empty()) continue;
+    const Finding& f = d.steps[k].findings.front();
+    if (f.prediction_parameters.empty() || !final_model.has(f.effect)) continue;
+    const auto [band, jump] = band_and_jump(f.effect, f.prediction_parameters);
+    if (std::isnan(band)) continue;
+    const double width = std::max(range.hi - range.lo, 1e-12);
+    a.prediction_band_percent = 100.0 * band / width;
+    a.prediction_jump_percent = 100.0 * jump / width;
+  }
   return a;
 }
 

@@ -16,6 +16,7 @@
 
 #include "../common/run_cli.hpp"
 #include "../common/sanitized.hpp"
+#include "valvediag/sim/random_loop.hpp"
 #include "valvediag/sim/scenarios.hpp"
 #include "valvediag/sweep/loop_assessment.hpp"
 #include "valvediag/sweep/loop_verdict.hpp"
@@ -233,4 +234,21 @@ TEST_CASE("one verdict: loop_verdict is the sweep's assessment and ignores a com
   CHECK(w.verdict == v.verdict);
   CHECK(w.model == v.model);
   CHECK(w.stiction.band_percent == doctest::Approx(v.stiction.band_percent));
+}
+
+// Development seed 48 of the benchmark (test_diagnosis): Kano stiction S 1.97 % of OP in a
+// regulatory loop, which the climb adds on the friction refitted to the one-step prediction; the
+// final model's simulated-output fit collapses the band, so the verdict's size carries the
+// refit's figures beside it rather than report a sticky valve of 0 %.
+TEST_CASE("one verdict: a friction ranked on its refitted prediction keeps that size" *
+          valvediag::test::release_only()) {
+  const LoopData d = simulate_random_loop(draw_random_loop(48, "stiction"));
+  const LoopVerdict v = loop_verdict(d);
+  REQUIRE(v.judged());
+  CHECK(v.verdict == "stiction");
+  CHECK(v.stiction.prediction_band_percent == doctest::Approx(1.97).epsilon(0.25));
+  CHECK(v.stiction.prediction_jump_percent >= 0.0);
+  CHECK(v.stiction.prediction_jump_percent <= v.stiction.prediction_band_percent);
+  const LoopAssessment a = assess_loop(d, "FIC48");
+  CHECK(a.prediction_stiction_percent == doctest::Approx(v.stiction.prediction_band_percent));
 }

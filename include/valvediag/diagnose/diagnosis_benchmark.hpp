@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -18,6 +19,9 @@ namespace valvediag {
 struct ParameterError {
   std::string effect, name;
   double truth = 0.0, estimate = 0.0;
+  // The same figure refitted to the one-step prediction (Finding::prediction_parameters; the
+  // estimate when the refit kept the trial's), NaN for effects that are not refitted.
+  double refit = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct BenchmarkOutcome {

@@ -41,7 +41,9 @@ struct LoopAssessment {
   // when the size comes from a Preisach valve's refined figures; NaN otherwise.
   double stiction_lo_percent = kNaN, stiction_hi_percent = kNaN;
   bool stiction_hi_open = false;  // hi is the record's OP span: the data do not bound fs above
-  std::string model;              // best model (top of the climbed ladder)
+  // The friction refitted to the one-step prediction that ranked it (FrictionSize; NaN: none).
+  double prediction_stiction_percent = kNaN;
+  std::string model;  // best model (top of the climbed ladder)
   double fitness_percent = kNaN, validation_fitness_percent = kNaN;
   std::string first_missing;  // the effect the linear model misses first ("" when none)
   std::vector<LadderStep> ladder;

@@ -49,6 +49,10 @@ struct FrictionSize {
   // The data do not bound the band from above: band_hi_percent is the record's OP span, the
   // search's top, and the range reads "at least band_lo_percent".
   bool band_hi_open = false;
+  // The friction refitted to the one-step prediction of PV (prediction_refit.hpp) in the climb's
+  // step that added it, when that refit moved it and the finding ranked first: in closed loop
+  // the simulated-output fit above can collapse a friction the prediction sees (NaN otherwise).
+  double prediction_band_percent = kNaN, prediction_jump_percent = kNaN;
 };
 
 // The verdict of the same record scored on another held-out share (VerdictOptions::check_splits).
