@@ -268,6 +268,13 @@ bool lr_refutes(const std::vector<double>& y, const std::vector<double>& narrow_
   return -2.0 * n_eff * std::log(ratio) > chi_square_quantile_99(std::max(1.0, dof));
 }
 
+// An effect on the path from OP to PV: the valve's, a dead time or an extra process lag (the
+// one-step prediction from the valve position judges these; prediction_error.hpp).
+bool on_input_path(const std::string& e) {
+  const EffectInfo* info = find_effect(e);
+  return (info && info->stage == EffectStage::Valve) || e == "delay" || e == "order";
+}
+
 // The pairs of trial effects where one is the other with a parameter held (Kano's stiction with
 // no jump is a deadband of the band S; He's with fd = fs one of 2 fs): narrower first.
 constexpr std::pair<const char*, const char*> kNestedEffects[] = {{"deadband", "stiction"}};
@@ -494,9 +501,9 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   if (pe_model.ok) {
     parallel_for(jobs.size(), worker_count(fo.threads, jobs.size()), [&](unsigned, std::size_t j) {
       const auto [i, f] = jobs[j];
-      const EffectInfo* info = find_effect(names[i]);
-      const bool lag_or_valve = (info && info->stage == EffectStage::Valve) || names[i] == "order";
-      if (!lag_or_valve || names[i] == "preisach" || f->estimation_end != step.fit.estimation_end)
+      // `delay` has no coordinates to refit (its dead time is the predictor's own, profiled).
+      if (!on_input_path(names[i]) || names[i] == "delay" || names[i] == "preisach" ||
+          f->estimation_end != step.fit.estimation_end)
         return;
       PredictionRefitOptions po;
       po.order = kPredictionOrder;
@@ -673,15 +680,11 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // Clearly: "positive" evidence on Kass and Raftery's scale of BIC differences (2 ln of the
   // Bayes factor); below it the two predictions do not tell the models apart.
   constexpr double kPositiveBic = 2.0;
-  const auto input_path = [](const std::string& e) {
-    const EffectInfo* info = find_effect(e);
-    return (info && info->stage == EffectStage::Valve) || e == "delay" || e == "order";
-  };
-  const auto ranks_above = [margin, base_score, &size, &mutual, &wider_wins, &input_path](
-                               const Finding& a, const Finding& b) {
+  const auto ranks_above = [margin, base_score, &size, &mutual, &wider_wins](const Finding& a,
+                                                                             const Finding& b) {
     if (const auto it = wider_wins.find({a.effect, b.effect}); it != wider_wins.end())
       return it->second == a.effect;
-    if (input_path(a.effect) && input_path(b.effect) &&
+    if (on_input_path(a.effect) && on_input_path(b.effect) &&
         !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported == b.supported &&
         std::isfinite(a.prediction_bic_change) && std::isfinite(b.prediction_bic_change) &&
         std::min(a.prediction_bic_change, b.prediction_bic_change) <= -kPositiveBic &&
