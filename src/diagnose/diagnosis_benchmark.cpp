@@ -62,8 +62,9 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
         diagnose(d.op, d.pv, d.sample_period(), parse_model_spec(loop.start_model), opt);
     const auto& f = dg.last().findings;
     for (const auto& x : f)
-      o.detail += strprintf(" %s:%.2f/%.2f/%.0f", x.effect.c_str(), x.estimation_gain_percent,
-                            x.validation_gain_percent, x.prediction_bic_change);
+      o.detail += strprintf(" %s:%.2f/%.2f/%.0f/%.3f", x.effect.c_str(), x.estimation_gain_percent,
+                            x.validation_gain_percent, x.prediction_bic_change,
+                            x.prediction_validation_gain_percent);
     for (const auto& x : f) {
       o.ranked.push_back(x.effect);
       o.supported.push_back(x.supported);

@@ -39,7 +39,8 @@ struct BenchmarkOutcome {
   bool false_alarm = false;            // a control with a supported finding
   std::string false_effect;            // what it found
   std::vector<ParameterError> errors;  // the hidden effects' fitted parameters against the truth
-  // Each finding, ranked: effect:estimation gain/held-out gain/prediction BIC change.
+  // Each finding, ranked: effect:estimation gain/held-out gain/prediction BIC change/held-out
+  // prediction gain.
   std::string detail;
   double seconds = 0.0;
   std::string error;  // the diagnosis threw: why
