@@ -680,10 +680,16 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // Clearly: "positive" evidence on Kass and Raftery's scale of BIC differences (2 ln of the
   // Bayes factor); below it the two predictions do not tell the models apart.
   constexpr double kPositiveBic = 2.0;
-  const auto ranks_above = [margin, base_score, &size, &mutual, &wider_wins](const Finding& a,
-                                                                             const Finding& b) {
+  // An actuator lag and a process lag commute when no valve nonlinearity sits between them: no
+  // record of OP and PV can place such a lag in the valve, so the process's is named.
+  const bool lags_commute = !has_valve_nonlinearity(model);
+  const auto ranks_above = [margin, base_score, lags_commute, &size, &mutual, &wider_wins](
+                               const Finding& a, const Finding& b) {
     if (const auto it = wider_wins.find({a.effect, b.effect}); it != wider_wins.end())
       return it->second == a.effect;
+    if (lags_commute && ((a.effect == "order" && b.effect == "actuator-lag") ||
+                         (a.effect == "actuator-lag" && b.effect == "order")))
+      return a.effect == "order";
     if (on_input_path(a.effect) && on_input_path(b.effect) &&
         !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported == b.supported &&
         std::isfinite(a.prediction_bic_change) && std::isfinite(b.prediction_bic_change) &&
@@ -745,11 +751,10 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (names[i] == a.effect) fa = &fits[i];
       if (names[i] == b.effect) fb = &fits[i];
     }
-    // An actuator lag and a process lag commute when no valve nonlinearity sits between them:
-    // on such a model no data can tell them apart.
+    // Commuting lags (lags_commute): no data can tell them apart.
     const bool commuting_lags =
-        !has_valve_nonlinearity(model) && ((a.effect == "actuator-lag" && b.effect == "order") ||
-                                           (a.effect == "order" && b.effect == "actuator-lag"));
+        lags_commute && ((a.effect == "actuator-lag" && b.effect == "order") ||
+                         (a.effect == "order" && b.effect == "actuator-lag"));
     if (fa && fb && a.gain_percent >= opt.min_gain_percent &&
         b.gain_percent >= opt.min_gain_percent &&
         std::abs(a.gain_percent - b.gain_percent) <=
