@@ -90,6 +90,9 @@ class Positioner {
     const auto [lo, hi] = std::minmax_element(op.begin(), op.end());
     centre_ = 0.5 * (*lo + *hi);
     half_ = std::max(0.5 * (*hi - *lo), 1e-9);
+    // The calibration's samples do not depend on the candidate: found once.
+    for (std::size_t k = 0; k < n_est_; ++k)
+      if (!lim_.at(mv_[k])) off_limits_.push_back(k);
   }
 
   Evaluated evaluate(const Candidate& c, bool keep = false) const {
@@ -106,16 +109,16 @@ class Positioner {
     const int m = degree_ + 1;
     Eigen::Matrix4d A = Eigen::Matrix4d::Zero();
     Eigen::Vector4d b = Eigen::Vector4d::Zero();
-    std::size_t used = 0;
-    for (std::size_t k = 0; k < n_est_; ++k) {
-      if (lim_.at(mv_[k])) continue;
-      ++used;
-      double p[4] = {1.0, z[k], z[k] * z[k], z[k] * z[k] * z[k]};
+    const std::size_t used = off_limits_.size();
+    for (const std::size_t k : off_limits_) {
+      const double p[4] = {1.0, z[k], z[k] * z[k], z[k] * z[k] * z[k]};
       for (int i = 0; i < m; ++i) {
         b(i) += p[i] * mv_[k];
-        for (int j = 0; j < m; ++j) A(i, j) += p[i] * p[j];
+        for (int j = 0; j <= i; ++j) A(i, j) += p[i] * p[j];
       }
     }
+    for (int i = 0; i < m; ++i)
+      for (int j = i + 1; j < m; ++j) A(i, j) = A(j, i);
     Evaluated e;
     if (used < static_cast<std::size_t>(2 * m)) return e;
     // Minimum-norm solution: a valve model that never moves makes the powers collinear.
@@ -148,6 +151,7 @@ class Positioner {
   Limits lim_;
   int degree_;
   double centre_ = 0.0, half_ = 1.0;
+  std::vector<std::size_t> off_limits_;  // estimation samples off the travel limits
 };
 
 // A travel limit is a plateau at MV's extreme (at least 2 % of the samples within noise of its
