@@ -659,8 +659,22 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // test, not by scores: the residual hints point alike at both, and the wider model, fitting at
   // least as well, would win every near tie (measured: deadbands named stiction on an
   // estimation gain 0.02-0.5 points larger).
-  const std::map<EffectPair, std::string> wider_wins =
+  std::map<EffectPair, std::string> wider_wins =
       nested_winners(y, Ts, names, fits, step.findings, predictions, margin, step.judge);
+  // `preisach` generalizes both frictions: a supported friction ranks above a `preisach` that
+  // its test beyond the frictions does not support (it may gain more, but not more than its
+  // extra parameters buy).
+  for (const char* narrow : {"stiction", "deadband"}) {
+    const auto find = [&](const char* e) {
+      const auto it = std::find_if(step.findings.begin(), step.findings.end(),
+                                   [e](const Finding& f) { return f.effect == e; });
+      return it == step.findings.end() ? nullptr : &*it;
+    };
+    const Finding* n = find(narrow);
+    const Finding* p = find("preisach");
+    if (n && p && n->supported && !p->supported)
+      wider_wins[{narrow, "preisach"}] = wider_wins[{"preisach", narrow}] = narrow;
+  }
   auto mutual = [](const std::string& a, const std::string& b) {
     return (is_memory_effect(a) && b == "disturbance") ||
            (is_memory_effect(b) && a == "disturbance");
