@@ -21,25 +21,33 @@ namespace valvediag::test {
 
 // Starts `args` (args[0]: the program) with stdout and stderr into `out`; `env` changes the
 // child's environment ("NAME=VALUE" sets, "-NAME" removes), `cwd` its working folder.
+// Everything the child needs is built before fork(): a test may run a server thread (SimPlc),
+// and an allocation in the child could wait for a lock that thread held at the fork, for ever.
+// Between fork and exec the child makes only async-signal-safe calls.
 inline pid_t spawn(const std::vector<std::string>& args, const std::filesystem::path& out,
                    const std::vector<std::string>& env = {}, const std::string& cwd = "") {
+  std::vector<char*> argv;
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  std::vector<std::string> vars;
+  for (char** e = environ; *e; ++e) vars.emplace_back(*e);
+  for (const auto& e : env) {
+    const bool remove = e.starts_with('-');
+    const std::string name = remove ? e.substr(1) : e.substr(0, e.find('='));
+    std::erase_if(vars, [&](const std::string& v) { return v.starts_with(name + "="); });
+    if (!remove && e.find('=') != std::string::npos) vars.push_back(e);
+  }
+  std::vector<char*> envp;
+  for (auto& v : vars) envp.push_back(v.data());
+  envp.push_back(nullptr);
+  const std::string path = out.string();
   const pid_t pid = ::fork();
   if (pid == 0) {
-    const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     ::dup2(fd, 1);
     ::dup2(fd, 2);
-    for (const auto& e : env) {  // the test programs are single-threaded: setenv is safe here
-      const auto eq = e.find('=');
-      if (e.starts_with('-'))
-        ::unsetenv(e.c_str() + 1);
-      else if (eq != std::string::npos)
-        ::setenv(e.substr(0, eq).c_str(), e.c_str() + eq + 1, 1);
-    }
     if (!cwd.empty() && ::chdir(cwd.c_str()) != 0) ::_exit(126);
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(argv[0], argv.data());
+    ::execve(argv[0], argv.data(), envp.data());
     ::_exit(127);
   }
   return pid;
