@@ -342,6 +342,14 @@ std::map<EffectPair, std::string> nested_winners(const std::vector<double>& y, d
     out[{narrow, wide}] = winner;
     out[{wide, narrow}] = winner;
   }
+  // `preisach` generalizes both frictions, and its own finding carries the test beyond them
+  // (evaluate): a supported friction ranks above a `preisach` that test does not support (it
+  // may gain more, but not more than its extra parameters buy).
+  const std::size_t p = index("preisach");
+  if (p < findings.size() && !findings[p].supported)
+    for (const char* narrow : {"stiction", "deadband"})
+      if (const std::size_t n = index(narrow); n < findings.size() && findings[n].supported)
+        out[{narrow, "preisach"}] = out[{"preisach", narrow}] = narrow;
   return out;
 }
 
@@ -489,9 +497,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   };
   const PredictionError pe_model = prediction_of(step.fit);
   // A valve effect or an extra lag is scored on the prediction at its parameters refitted to it
-  // (the simulated output's fit can miss the effect in closed loop: prediction_refit.hpp); the
-  // actuator's lag and the process's alike, as they commute on a linear valve. Not the
-  // Preisach plane (no coordinates) nor its position-dependent friction (six).
+  // (the simulated output's fit can miss the effect in closed loop: refitted_to_prediction).
   // Each stiction variant is refitted (the simulated output chose one; the prediction may
   // prefer another's friction), the best prediction kept.
   std::vector<std::pair<std::size_t, const ModelFit*>> jobs;
@@ -501,10 +507,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   if (pe_model.ok) {
     parallel_for(jobs.size(), worker_count(fo.threads, jobs.size()), [&](unsigned, std::size_t j) {
       const auto [i, f] = jobs[j];
-      // `delay` has no coordinates to refit (its dead time is the predictor's own, profiled).
-      if (!on_input_path(names[i]) || names[i] == "delay" || names[i] == "preisach" ||
-          f->estimation_end != step.fit.estimation_end)
-        return;
+      if (!refitted_to_prediction(names[i]) || f->estimation_end != step.fit.estimation_end) return;
       PredictionRefitOptions po;
       po.order = kPredictionOrder;
       po.nk_max = nk_range(*f);
@@ -659,22 +662,8 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // test, not by scores: the residual hints point alike at both, and the wider model, fitting at
   // least as well, would win every near tie (measured: deadbands named stiction on an
   // estimation gain 0.02-0.5 points larger).
-  std::map<EffectPair, std::string> wider_wins =
+  const std::map<EffectPair, std::string> wider_wins =
       nested_winners(y, Ts, names, fits, step.findings, predictions, margin, step.judge);
-  // `preisach` generalizes both frictions: a supported friction ranks above a `preisach` that
-  // its test beyond the frictions does not support (it may gain more, but not more than its
-  // extra parameters buy).
-  for (const char* narrow : {"stiction", "deadband"}) {
-    const auto find = [&](const char* e) {
-      const auto it = std::find_if(step.findings.begin(), step.findings.end(),
-                                   [e](const Finding& f) { return f.effect == e; });
-      return it == step.findings.end() ? nullptr : &*it;
-    };
-    const Finding* n = find(narrow);
-    const Finding* p = find("preisach");
-    if (n && p && n->supported && !p->supported)
-      wider_wins[{narrow, "preisach"}] = wider_wins[{"preisach", narrow}] = narrow;
-  }
   auto mutual = [](const std::string& a, const std::string& b) {
     return (is_memory_effect(a) && b == "disturbance") ||
            (is_memory_effect(b) && a == "disturbance");
@@ -697,13 +686,15 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // An actuator lag and a process lag commute when no valve nonlinearity sits between them: no
   // record of OP and PV can place such a lag in the valve, so the process's is named.
   const bool lags_commute = !has_valve_nonlinearity(model);
-  const auto ranks_above = [margin, base_score, lags_commute, &size, &mutual, &wider_wins](
-                               const Finding& a, const Finding& b) {
+  const auto lag_pair = [](const Finding& a, const Finding& b) {
+    return (a.effect == "order" && b.effect == "actuator-lag") ||
+           (a.effect == "actuator-lag" && b.effect == "order");
+  };
+  const auto ranks_above = [margin, base_score, lags_commute, &lag_pair, &size, &mutual,
+                            &wider_wins](const Finding& a, const Finding& b) {
     if (const auto it = wider_wins.find({a.effect, b.effect}); it != wider_wins.end())
       return it->second == a.effect;
-    if (lags_commute && ((a.effect == "order" && b.effect == "actuator-lag") ||
-                         (a.effect == "actuator-lag" && b.effect == "order")))
-      return a.effect == "order";
+    if (lags_commute && lag_pair(a, b)) return a.effect == "order";
     if (on_input_path(a.effect) && on_input_path(b.effect) &&
         !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported == b.supported &&
         std::isfinite(a.prediction_bic_change) && std::isfinite(b.prediction_bic_change) &&
@@ -766,9 +757,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (names[i] == b.effect) fb = &fits[i];
     }
     // Commuting lags (lags_commute): no data can tell them apart.
-    const bool commuting_lags =
-        lags_commute && ((a.effect == "actuator-lag" && b.effect == "order") ||
-                         (a.effect == "order" && b.effect == "actuator-lag"));
+    const bool commuting_lags = lags_commute && lag_pair(a, b);
     if (fa && fb && a.gain_percent >= opt.min_gain_percent &&
         b.gain_percent >= opt.min_gain_percent &&
         std::abs(a.gain_percent - b.gain_percent) <=

@@ -6,6 +6,7 @@
 #include <map>
 #include <stdexcept>
 
+#include "valvediag/diagnose/prediction_refit.hpp"
 #include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
@@ -101,10 +102,7 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
           for (const auto& t : loop.truth)
             if (t.effect == h) {
               const double est = estimate_of(t, x.parameters);
-              // The effects prediction_refit.hpp refits (diagnosis.cpp), Preisach's aside.
-              const bool refitted = h == "stiction" || h == "deadband" || h == "saturation" ||
-                                    h == "characteristic" || h == "actuator-lag";
-              const double refit = !refitted ? std::nan("")
+              const double refit = !refitted_to_prediction(h) ? std::nan("")
                                    : x.prediction_parameters.empty()
                                        ? est
                                        : estimate_of(t, x.prediction_parameters);

@@ -34,6 +34,12 @@ struct PredictionRefit {
   int evaluations = 0;
 };
 
+// Whether the diagnosis refits `effect` to the prediction: a valve effect (the actuator's lag
+// too) or `order`'s extra lag, which commutes with it on a linear valve. Not the Preisach plane
+// (no coordinates) nor its position-dependent friction (six), nor `delay` (its dead time is the
+// predictor's own, profiled).
+bool refitted_to_prediction(const std::string& effect);
+
 // Refits the block of `effect` in `trial`'s valve chain (the other blocks held) to minimize
 // the one-step prediction error on the estimation part: a grid over the effect's first search
 // coordinate with the others at the trial's values, then Nelder-Mead over all of them from the
