@@ -82,13 +82,13 @@ void diagnose_and_report(const LoopData& d, const FitRun& run, const std::string
     const auto& base = diag.steps.front().fit;
     if (std::isfinite(base.fitness_percent))
       std::printf(
-          "  linear: %.2f %% estimation, %.2f %% validation; the best trial fits "
-          "(ranked by gain, the smaller of the two parts):\n",
+          "  linear: %.2f %% estimation, %.2f %% validation; the trial fits, most likely "
+          "missing first (the diagnosis's ranking: `diagnose` says why):\n",
           base.fitness_percent, base.validation_fitness_percent);
     else  // gains are then counted from a fitness of 0 (the mean)
       std::printf(
-          "  linear: no stable model on this record; the best trial fits (ranked by "
-          "gain, the smaller of the two parts):\n");
+          "  linear: no stable model on this record; the trial fits, most likely missing "
+          "first (the diagnosis's ranking: `diagnose` says why):\n");
     const auto& findings = diag.steps.front().findings;
     for (std::size_t i = 0; i < findings.size() && i < 3; ++i)
       std::printf("  %zu. + %-15s %+.2f / %+.2f points (validation / estimation), score %.2f\n",
