@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Installs the Debian packages valvediag builds against. Only what is missing.
+# Installs the Debian packages valvediag builds and tests against. Only what is missing.
 set -euo pipefail
 pkgs=(cmake g++ make libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
-      libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox)
+      libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox
+      chromium libpng-dev fonts-dejavu-core)  # the test that screenshots the pages (test/report)
 [ "${VALVEDIAG_FUZZ_DEPS:-0}" = 1 ] && pkgs+=(clang libclang-rt-dev)
 missing=()
 for p in "${pkgs[@]}"; do

@@ -20,12 +20,15 @@
 namespace valvediag::test {
 
 // Starts `args` (args[0]: the program) with stdout and stderr into `out`; `env` changes the
-// child's environment ("NAME=VALUE" sets, "-NAME" removes), `cwd` its working folder.
+// child's environment ("NAME=VALUE" sets, "-NAME" removes), `cwd` its working folder. With
+// `own_group` the child leads a process group of its own, so that kill(-pid) ends what it started
+// too (a browser's helper processes).
 // Everything the child needs is built before fork(): a test may run a server thread (SimPlc),
 // and an allocation in the child could wait for a lock that thread held at the fork, for ever.
 // Between fork and exec the child makes only async-signal-safe calls.
 inline pid_t spawn(const std::vector<std::string>& args, const std::filesystem::path& out,
-                   const std::vector<std::string>& env = {}, const std::string& cwd = "") {
+                   const std::vector<std::string>& env = {}, const std::string& cwd = "",
+                   bool own_group = false) {
   std::vector<char*> argv;
   for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
@@ -43,6 +46,7 @@ inline pid_t spawn(const std::vector<std::string>& args, const std::filesystem::
   const std::string path = out.string();
   const pid_t pid = ::fork();
   if (pid == 0) {
+    if (own_group) ::setpgid(0, 0);
     const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     ::dup2(fd, 1);
     ::dup2(fd, 2);
@@ -50,6 +54,7 @@ inline pid_t spawn(const std::vector<std::string>& args, const std::filesystem::
     ::execve(argv[0], argv.data(), envp.data());
     ::_exit(127);
   }
+  if (own_group && pid > 0) ::setpgid(pid, pid);  // also here: kill(-pid) works at once
   return pid;
 }
 
