@@ -2,8 +2,10 @@
 # Installs the Debian packages valvediag builds and tests against. Only what is missing.
 set -euo pipefail
 pkgs=(cmake g++ make libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
-      libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox
-      chromium libpng-dev fonts-dejavu-core)  # the test that screenshots the pages (test/report)
+      libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox libpng-dev)
+# The browser the tests screenshot the pages in (test/report/test_browser.cpp): test.sh's only,
+# not the demo's.
+[ "${VALVEDIAG_TEST_DEPS:-0}" = 1 ] && pkgs+=(chromium fonts-dejavu-core)
 [ "${VALVEDIAG_FUZZ_DEPS:-0}" = 1 ] && pkgs+=(clang libclang-rt-dev)
 missing=()
 for p in "${pkgs[@]}"; do

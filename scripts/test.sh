@@ -4,7 +4,7 @@
 # scripts/accuracy.sh's.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/install-deps.sh
+VALVEDIAG_TEST_DEPS=1 scripts/install-deps.sh
 jobs=$(nproc)
 # Each phase's wall time, for keeping CI within its limit.
 phase() { echo "== test.sh: $1 done at ${SECONDS} s"; }
