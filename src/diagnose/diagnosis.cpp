@@ -545,6 +545,16 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     f.trial_fitness_percent = t.fitness_percent;
     f.trial_validation_fitness_percent = t.validation_fitness_percent;
     f.estimation_gain_percent = finite_or(t.fitness_percent, -1e9) - base_est;
+    // Over the samples both simulate: a trial whose structure reaches further back (a long dead
+    // time) starts later, and a fitness over other samples is no comparison.
+    if (t.first_sample != step.fit.first_sample && t.y_sim.size() == y.size() &&
+        step.fit.y_sim.size() == y.size() && t.estimation_end == step.fit.estimation_end) {
+      const std::size_t from = std::max(t.first_sample, step.fit.first_sample);
+      if (from + 1 < t.estimation_end)
+        f.estimation_gain_percent =
+            finite_or(fitness_percent(y, t.y_sim, from, t.estimation_end), -1e9) -
+            finite_or(fitness_percent(y, step.fit.y_sim, from, t.estimation_end), -1e9);
+    }
     f.validation_gain_percent = finite_or(t.validation_fitness_percent, -1e9) - base_val;
     for (const auto& e : t.effects)
       if (e.name == f.effect) f.parameters = e.parameters;

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <functional>
 #include <map>
+#include <random>
 #include <string>
 #include <utility>
 #include <vector>
@@ -528,4 +529,39 @@ TEST_CASE("a friction the simulated output misses ranks first on its refitted pr
     if (f[i].effect == "deadband" || f[i].effect == "actuator-lag")
       CHECK(f[i].prediction_bic_change > f[0].prediction_bic_change + 20.0);
   }
+}
+
+// A trial whose structure reaches further back (a `delay`, searched up to an eighth of the
+// estimation part) starts its simulation later than the model. Its estimation gain is measured
+// over the samples both simulate: a start the model fails on (here a burst of measurement noise
+// in PV's first 200 samples) is no gain of the dead time's.
+TEST_CASE("a trial that starts later gains only over the samples both fits simulate") {
+  // Open loop: PV a first-order response to OP's random steps (dead time 2 samples), with
+  // measurement noise, and a burst of larger noise over samples 20-220.
+  const std::size_t N = 3000;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> level(30.0, 70.0);
+  std::uniform_int_distribution<int> hold(20, 80);
+  std::normal_distribution<double> noise(0.0, 0.2);
+  std::vector<double> op(N), pv(N, 50.0);
+  for (std::size_t t = 0; t < N;) {
+    const double v = level(rng);
+    for (int k = hold(rng); k > 0 && t < N; --k) op[t++] = v;
+  }
+  double x = 50.0;
+  for (std::size_t t = 3; t < N; ++t) {
+    x = 0.95 * x + 0.05 * op[t - 3];
+    pv[t] = x + noise(rng) * (t >= 20 && t < 220 ? 20.0 : 1.0);
+  }
+  DiagnoseOptions o;
+  o.candidates = {"delay"};
+  const Diagnosis dg = diagnose(op, pv, 1.0, parse_model_spec("linear"), o);
+  const DiagnosisStep& s = dg.last();
+  REQUIRE(s.findings.size() == 1);
+  const Finding& f = s.findings[0];
+  // The setup: each fitness over its own samples would credit the trial with the burst.
+  CHECK(f.trial_fitness_percent - s.fit.fitness_percent > 5.0);
+  CHECK(std::abs(f.estimation_gain_percent) < 1.0);
+  CHECK(std::abs(f.validation_gain_percent) < 1.0);
+  CHECK_FALSE(f.supported);
 }
