@@ -25,6 +25,8 @@ std::string to_string(BusKind k) {
       return "modbus-rtu";
     case BusKind::socketcan:
       return "socketcan";
+    case BusKind::modbus_rtu_over_tcp:
+      return "modbus-rtu-over-tcp";
   }
   return "?";
 }
@@ -287,26 +289,60 @@ bool valid_name(const std::string& s) {
   return true;
 }
 
+// The bus's protocol, from `protocol` or from Telegraf's `transmission_mode` (with the
+// controller's scheme for its "auto"), so that a bus pasted from Telegraf's Modbus input reads as
+// is; when both are given they must agree.
+BusKind read_protocol(const Table& t) {
+  const char* const protocols = "modbus-tcp, modbus-rtu, modbus-rtu-over-tcp or socketcan";
+  std::optional<BusKind> kind;
+  if (t.has("protocol") || !t.has("transmission_mode")) {
+    const std::string protocol = t.string("protocol", "", true);
+    for (BusKind k : {BusKind::modbus_tcp, BusKind::modbus_rtu, BusKind::modbus_rtu_over_tcp,
+                      BusKind::socketcan})
+      if (protocol == to_string(k)) kind = k;
+    if (!kind) t.fail("protocol", "'" + protocol + "' is not a protocol; use " + protocols);
+  }
+  if (!t.has("transmission_mode")) return *kind;
+  if (kind == BusKind::socketcan)
+    t.fail("transmission_mode", "only applies to Modbus buses; remove it");
+  const std::string mode = t.string("transmission_mode", "");
+  std::optional<BusKind> from_mode;
+  if (mode == "TCP")
+    from_mode = BusKind::modbus_tcp;
+  else if (mode == "RTU")
+    from_mode = BusKind::modbus_rtu;
+  else if (mode == "RTUoverTCP")
+    from_mode = BusKind::modbus_rtu_over_tcp;
+  else if (mode == "auto")  // Telegraf's default: by the controller's scheme
+    from_mode = t.string("controller", "").rfind("file://", 0) == 0 ? BusKind::modbus_rtu
+                                                                    : BusKind::modbus_tcp;
+  else if (mode == "ASCII" || mode == "ASCIIoverTCP")
+    t.fail("transmission_mode",
+           "Modbus ASCII is not supported; use \"TCP\", \"RTUoverTCP\" or \"RTU\"");
+  else
+    t.fail("transmission_mode", "'" + mode +
+                                    "' must be \"TCP\", \"RTUoverTCP\", \"RTU\" or \"auto\" "
+                                    "(Telegraf's spellings, case as shown), or remove it and give "
+                                    "protocol = \"...\"");
+  if (kind && *kind != *from_mode)
+    t.fail("transmission_mode", "\"" + mode + "\" means protocol \"" + to_string(*from_mode) +
+                                    "\", but protocol is \"" + to_string(*kind) +
+                                    "\"; keep one of the two");
+  return *from_mode;
+}
+
 BusConfig read_bus(const Table& t, const std::string& base_dir) {
-  t.allow_only({"name", "protocol", "controller", "slave_id", "timeout", "retries",
-                "pause_between_requests", "reconnect_max", "baud_rate", "parity", "data_bits",
-                "stop_bits", "interface", "dbc"});
+  t.allow_only({"name", "protocol", "transmission_mode", "controller", "slave_id", "timeout",
+                "retries", "pause_between_requests", "reconnect_max", "baud_rate", "parity",
+                "data_bits", "stop_bits", "interface", "dbc"});
   BusConfig b;
   b.line = t.line();
   b.name = t.string("name", "", true);
   if (!valid_name(b.name))
     t.fail("name", "'" + b.name + "' is not a valid name; use letters, digits, '_', '-', '.'");
-  const std::string protocol = t.string("protocol", "", true);
-  if (protocol == "modbus-tcp")
-    b.kind = BusKind::modbus_tcp;
-  else if (protocol == "modbus-rtu")
-    b.kind = BusKind::modbus_rtu;
-  else if (protocol == "socketcan")
-    b.kind = BusKind::socketcan;
-  else
-    t.fail("protocol",
-           "'" + protocol + "' is not a protocol; use modbus-tcp, modbus-rtu or socketcan");
+  b.kind = read_protocol(t);
   const bool modbus = b.kind != BusKind::socketcan;
+  const bool over_tcp = b.kind == BusKind::modbus_tcp || b.kind == BusKind::modbus_rtu_over_tcp;
   auto only_for = [&](std::initializer_list<std::string_view> keys, bool ok, const char* what) {
     for (auto k : keys)
       if (!ok && t.has(k)) t.fail(k, std::string("only applies to ") + what + " buses; remove it");
@@ -314,15 +350,23 @@ BusConfig read_bus(const Table& t, const std::string& base_dir) {
   only_for(
       {"controller", "slave_id", "timeout", "retries", "pause_between_requests", "reconnect_max"},
       modbus, "Modbus");
+  for (auto k : {"baud_rate", "parity", "data_bits", "stop_bits"})
+    if (b.kind == BusKind::modbus_rtu_over_tcp && t.has(k))
+      t.fail(k, "does not apply to RTU over TCP: the gateway sets its serial line; remove it");
   only_for({"baud_rate", "parity", "data_bits", "stop_bits"}, b.kind == BusKind::modbus_rtu,
            "Modbus RTU");
   only_for({"interface", "dbc"}, !modbus, "socketcan");
   if (modbus) {
     const std::string ctl = t.string("controller", "", true);
-    if (b.kind == BusKind::modbus_tcp) {
+    if (over_tcp) {
       // tcp://host:port as in Telegraf; only loopback is ever contacted by the tests.
       if (ctl.rfind("tcp://", 0) != 0)
-        t.fail("controller", "'" + ctl + "' must look like \"tcp://192.168.0.10:502\"");
+        t.fail("controller",
+               "'" + ctl + "' must look like \"tcp://192.168.0.10:502\"" +
+                   (b.kind == BusKind::modbus_rtu_over_tcp
+                        ? " (RTU over TCP goes to the gateway's TCP port; a serial line on this "
+                          "machine is protocol = \"modbus-rtu\")"
+                        : ""));
       const std::string hp = ctl.substr(6);
       const auto colon = hp.rfind(':');
       b.host = colon == std::string::npos ? hp : hp.substr(0, colon);
@@ -339,14 +383,20 @@ BusConfig read_bus(const Table& t, const std::string& base_dir) {
         // Port 0 is no server's port: a connect to it can only fail, on every poll.
         if (p < 1 || p > 65535)
           t.fail("controller",
-                 "port '" + port +
-                     "' is not 1..65535 (Modbus TCP is usually 502; for a free port of "
-                     "the simulated PLC use sim-plc --port 0)");
+                 "port '" + port + "' is not 1..65535 (" +
+                     (b.kind == BusKind::modbus_tcp
+                          ? "Modbus TCP is usually 502; for a free port of the simulated PLC "
+                            "use sim-plc --port 0)"
+                          : "the port the gateway serves its serial line on, e.g. 4001)"));
         b.port = p;
       }
     } else {
       if (ctl.rfind("file://", 0) != 0)
-        t.fail("controller", "'" + ctl + "' must look like \"file:///dev/ttyUSB0\"");
+        t.fail("controller",
+               "'" + ctl + "' must look like \"file:///dev/ttyUSB0\"" +
+                   (ctl.rfind("tcp://", 0) == 0 ? " (for a gateway on the network write protocol = "
+                                                  "\"modbus-rtu-over-tcp\" or \"modbus-tcp\")"
+                                                : ""));
       b.device = ctl.substr(7);
       if (b.device.empty()) t.fail("controller", "no serial device in '" + ctl + "'");
       b.baud_rate = static_cast<int>(t.integer("baud_rate", 19200, 50, 4000000));

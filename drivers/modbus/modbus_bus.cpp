@@ -14,6 +14,8 @@
 #include <stdexcept>
 #include <thread>
 
+#include "valvediag/drivers/modbus_rtu_over_tcp.hpp"
+
 namespace valvediag {
 
 std::vector<RegisterBlock> plan_requests(const LoopConfigEntry& loop) {
@@ -43,8 +45,6 @@ std::vector<RegisterBlock> plan_requests(const LoopConfigEntry& loop) {
 namespace {
 using Clock = std::chrono::steady_clock;
 
-enum class Failure { none, exception, timeout, garbled, link };
-
 Clock::duration seconds(double s) {
   return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
 }
@@ -56,31 +56,120 @@ struct RawHistory {
   bool seen = false;
 };
 
-Failure classify(int err) {
-  if (err == ETIMEDOUT) return Failure::timeout;
+ModbusFailure classify(int err) {
+  if (err == ETIMEDOUT) return ModbusFailure::timeout;
   if (err == EMBBADDATA || err == EMBBADCRC || err == EMBBADEXC || err == EMBMDATA ||
       err == EMBBADSLAVE || err == EMBUNKEXC)
-    return Failure::garbled;
-  if (err > MODBUS_ENOBASE && err < EMBXGTAR + 1) return Failure::exception;
-  return Failure::link;
+    return ModbusFailure::garbled;
+  if (err > MODBUS_ENOBASE && err < EMBXGTAR + 1) return ModbusFailure::exception;
+  return ModbusFailure::link;
 }
+
+// Modbus TCP and RTU (serial) on libmodbus.
+class LibmodbusTransport final : public ModbusTransport {
+ public:
+  explicit LibmodbusTransport(BusConfig cfg) : cfg_(std::move(cfg)) {}
+  ~LibmodbusTransport() override { close(); }
+
+  std::string where() const override {
+    return cfg_.kind == BusKind::modbus_tcp
+               ? cfg_.host + ":" + std::to_string(cfg_.port)
+               : cfg_.device + " @" + std::to_string(cfg_.baud_rate) + " baud";
+  }
+
+  std::string connect() override {
+    close();
+    ctx_ = cfg_.kind == BusKind::modbus_tcp
+               ? modbus_new_tcp(cfg_.host.c_str(), cfg_.port)
+               : modbus_new_rtu(cfg_.device.c_str(), cfg_.baud_rate, cfg_.parity, cfg_.data_bits,
+                                cfg_.stop_bits);
+    if (!ctx_) return "cannot create a libmodbus context: " + std::string(modbus_strerror(errno));
+    modbus_set_error_recovery(ctx_, MODBUS_ERROR_RECOVERY_NONE);
+    modbus_set_slave(ctx_, cfg_.slave_id);
+    const auto sec = static_cast<std::uint32_t>(cfg_.timeout_s);
+    const auto usec = static_cast<std::uint32_t>(std::lround((cfg_.timeout_s - sec) * 1e6));
+    modbus_set_response_timeout(ctx_, sec, std::min<std::uint32_t>(usec, 999999));
+    // Between two bytes of one reply: a truncated reply fails within about one more timeout
+    // (libmodbus's default is 0.5 s whatever the response timeout).
+    const double byte_s = std::clamp(cfg_.timeout_s, 0.05, 0.5);
+    modbus_set_byte_timeout(ctx_, 0, static_cast<std::uint32_t>(std::lround(byte_s * 1e6)));
+    if (modbus_connect(ctx_) == -1) {
+      const int err = errno;
+      close();
+      return "cannot connect to " + where() + ": " + modbus_strerror(err);
+    }
+    dirty_ = false;
+    return "";
+  }
+
+  void close() override {
+    if (!ctx_) return;
+    modbus_close(ctx_);
+    modbus_free(ctx_);
+    ctx_ = nullptr;
+  }
+
+  ModbusFailure read(const RegisterBlock& b, std::uint16_t* dest, std::string& error) override {
+    clear_line();
+    const int rc = b.reg == RegisterType::holding
+                       ? modbus_read_registers(ctx_, b.address, b.count, dest)
+                       : modbus_read_input_registers(ctx_, b.address, b.count, dest);
+    const int err = errno;
+    if (rc == b.count) return ModbusFailure::none;
+    error = rc < 0 ? modbus_strerror(err) : "short reply";
+    const ModbusFailure f = rc < 0 ? classify(err) : ModbusFailure::garbled;
+    if (rtu() && (f == ModbusFailure::timeout || f == ModbusFailure::garbled)) {
+      dirty_ = true;
+      drain_until_ = Clock::now() + seconds(cfg_.timeout_s);
+    }
+    return f;
+  }
+
+  bool reconnect_after_bad_reply() const override { return !rtu(); }
+
+ private:
+  bool rtu() const { return cfg_.kind == BusKind::modbus_rtu; }
+
+  // RTU, before each request: discard a late reply still due (bounded by drain_until_), then
+  // whatever else sits in the input buffer.
+  void clear_line() {
+    if (!rtu()) return;
+    if (dirty_) {
+      const int fd = modbus_get_socket(ctx_);
+      std::uint8_t junk[256];
+      for (auto now = Clock::now(); fd >= 0 && now < drain_until_; now = Clock::now()) {
+        const auto left =
+            std::chrono::duration_cast<std::chrono::milliseconds>(drain_until_ - now).count() + 1;
+        pollfd p{fd, POLLIN, 0};
+        const int rc = ::poll(&p, 1, static_cast<int>(left));
+        if (rc < 0 && errno != EINTR) break;
+        if (rc > 0 && ::read(fd, junk, sizeof junk) <= 0) break;  // link trouble: the request says
+      }
+      dirty_ = false;
+    }
+    modbus_flush(ctx_);
+  }
+
+  const BusConfig cfg_;
+  modbus_t* ctx_ = nullptr;
+  // RTU: after a timeout or garbled reply, a late (rest of a) reply may still come. Modbus RTU
+  // has no transaction id, so it would be taken for the answer to the next request, perhaps of
+  // another loop with the same layout: until drain_until_ the line is read and discarded.
+  bool dirty_ = false;
+  Clock::time_point drain_until_{};
+};
 }  // namespace
 
 struct ModbusBus::Impl {
   BusConfig cfg;
   std::vector<LoopConfigEntry> loops;
   std::vector<std::vector<RegisterBlock>> plans;
-  modbus_t* ctx = nullptr;
+  std::unique_ptr<ModbusTransport> wire;
   bool connected = false;
   bool ever_connected = false;
   Backoff backoff;
   Clock::time_point next_attempt{};
   Clock::time_point last_request{};
-  // RTU: after a timeout or garbled reply, a late (rest of a) reply may still come. Modbus RTU
-  // has no transaction id, so it would be taken for the answer to the next request, perhaps of
-  // another loop with the same layout: until drain_until the line is read and discarded.
-  bool dirty = false;
-  Clock::time_point drain_until{};
   std::vector<std::array<RawHistory, kPointCount>> history;  // per loop
   mutable std::mutex stats_mutex;
   BusStats st;
@@ -93,22 +182,12 @@ struct ModbusBus::Impl {
   }
 
   void close() {
-    if (ctx) {
-      modbus_close(ctx);
-      modbus_free(ctx);
-      ctx = nullptr;
-    }
+    if (wire) wire->close();
     if (connected) {
       std::lock_guard lock(stats_mutex);
       st.connected = false;
     }
     connected = false;
-  }
-
-  std::string where() const {
-    return cfg.kind == BusKind::modbus_tcp
-               ? cfg.host + ":" + std::to_string(cfg.port)
-               : cfg.device + " @" + std::to_string(cfg.baud_rate) + " baud";
   }
 
   // One connection attempt; on failure the next one waits for the backoff.
@@ -118,30 +197,11 @@ struct ModbusBus::Impl {
       std::lock_guard lock(stats_mutex);
       ++st.connect_attempts;
     }
-    ctx = cfg.kind == BusKind::modbus_tcp
-              ? modbus_new_tcp(cfg.host.c_str(), cfg.port)
-              : modbus_new_rtu(cfg.device.c_str(), cfg.baud_rate, cfg.parity, cfg.data_bits,
-                               cfg.stop_bits);
-    if (!ctx) {
-      fail_connect("cannot create a libmodbus context: " + std::string(modbus_strerror(errno)));
-      return false;
-    }
-    modbus_set_error_recovery(ctx, MODBUS_ERROR_RECOVERY_NONE);
-    modbus_set_slave(ctx, cfg.slave_id);
-    const auto sec = static_cast<std::uint32_t>(cfg.timeout_s);
-    const auto usec = static_cast<std::uint32_t>(std::lround((cfg.timeout_s - sec) * 1e6));
-    modbus_set_response_timeout(ctx, sec, std::min<std::uint32_t>(usec, 999999));
-    // Between two bytes of one reply: a truncated reply fails within about one more timeout
-    // (libmodbus's default is 0.5 s whatever the response timeout).
-    const double byte_s = std::clamp(cfg.timeout_s, 0.05, 0.5);
-    modbus_set_byte_timeout(ctx, 0, static_cast<std::uint32_t>(std::lround(byte_s * 1e6)));
-    if (modbus_connect(ctx) == -1) {
-      const int err = errno;
-      fail_connect("cannot connect to " + where() + ": " + modbus_strerror(err));
+    if (const std::string err = wire->connect(); !err.empty()) {
+      fail_connect(err);
       return false;
     }
     connected = true;
-    dirty = false;
     backoff.reset();
     std::lock_guard lock(stats_mutex);
     st.connected = true;
@@ -163,26 +223,6 @@ struct ModbusBus::Impl {
     std::this_thread::sleep_until(last_request + seconds(cfg.pause_s));
   }
 
-  // RTU, before each request: discard a late reply still due (bounded by drain_until), then
-  // whatever else sits in the input buffer.
-  void clear_line() {
-    if (cfg.kind != BusKind::modbus_rtu) return;
-    if (dirty) {
-      const int fd = modbus_get_socket(ctx);
-      std::uint8_t junk[256];
-      for (auto now = Clock::now(); fd >= 0 && now < drain_until; now = Clock::now()) {
-        const auto left =
-            std::chrono::duration_cast<std::chrono::milliseconds>(drain_until - now).count() + 1;
-        pollfd p{fd, POLLIN, 0};
-        const int rc = ::poll(&p, 1, static_cast<int>(left));
-        if (rc < 0 && errno != EINTR) break;
-        if (rc > 0 && ::read(fd, junk, sizeof junk) <= 0) break;  // link trouble: the request says
-      }
-      dirty = false;
-    }
-    modbus_flush(ctx);
-  }
-
   // Reads one block; "" on success, else the problem (counted).
   std::string read_block(const RegisterBlock& b, std::uint16_t* dest) {
     const int attempts = cfg.retries + 1;
@@ -192,41 +232,34 @@ struct ModbusBus::Impl {
         if (Clock::now() < next_attempt || !connect()) return st_last_error();
       }
       pause();
-      clear_line();
-      int rc = b.reg == RegisterType::holding
-                   ? modbus_read_registers(ctx, b.address, b.count, dest)
-                   : modbus_read_input_registers(ctx, b.address, b.count, dest);
-      const int err = errno;
+      std::string why;
+      const ModbusFailure f = wire->read(b, dest, why);
       last_request = Clock::now();
       {
         std::lock_guard lock(stats_mutex);
         ++st.requests;
-        if (rc != b.count) ++st.errors;
+        if (f != ModbusFailure::none) ++st.errors;
       }
-      if (rc == b.count) return "";
+      if (f == ModbusFailure::none) return "";
       const std::string what = to_string(b.reg) + " registers " + std::to_string(b.address) + ".." +
-                               std::to_string(b.address + b.count - 1) + " on " + where() + ": " +
-                               (rc < 0 ? modbus_strerror(err) : "short reply");
-      const Failure f = rc < 0 ? classify(err) : Failure::garbled;
+                               std::to_string(b.address + b.count - 1) + " on " + wire->where() +
+                               ": " + why;
       {
         std::lock_guard lock(stats_mutex);
         st.last_error = what;
-        if (f == Failure::exception) ++st.exceptions;
-        if (f == Failure::timeout) ++st.timeouts;
-        if (f == Failure::garbled) ++st.garbled;
-        if (f == Failure::link) ++st.disconnects;
+        if (f == ModbusFailure::exception) ++st.exceptions;
+        if (f == ModbusFailure::timeout) ++st.timeouts;
+        if (f == ModbusFailure::garbled) ++st.garbled;
+        if (f == ModbusFailure::link) ++st.disconnects;
       }
       // An exception is a definite answer from the device: retrying would not change it.
-      if (f == Failure::exception) return what;
+      if (f == ModbusFailure::exception) return what;
       problem = what;
-      if (f == Failure::link || cfg.kind == BusKind::modbus_tcp) {
+      if (f == ModbusFailure::link || wire->reconnect_after_bad_reply()) {
         // Link lost, or a late/garbled reply may still be in the stream: a clean connection,
         // the first attempt at once.
         close();
         next_attempt = Clock::now();
-      } else {
-        dirty = true;
-        drain_until = Clock::now() + seconds(cfg.timeout_s);
       }
     }
     return problem;
@@ -244,6 +277,10 @@ ModbusBus::ModbusBus(BusConfig config, std::vector<LoopConfigEntry> loops)
     throw std::invalid_argument("bus '" + config.name + "' is not a Modbus bus");
   impl_->backoff = Backoff(config.reconnect_max_s);
   impl_->cfg = std::move(config);
+  if (impl_->cfg.kind == BusKind::modbus_rtu_over_tcp)
+    impl_->wire = make_rtu_over_tcp_transport(impl_->cfg);
+  else
+    impl_->wire = std::make_unique<LibmodbusTransport>(impl_->cfg);
   impl_->loops = std::move(loops);
   for (const auto& l : impl_->loops) impl_->plans.push_back(plan_requests(l));
   impl_->history.resize(impl_->loops.size());

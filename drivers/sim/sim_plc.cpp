@@ -446,7 +446,7 @@ SimPlc::SimPlc(SiteConfig site, SimPlcOptions options) : impl_(std::make_unique<
     const bool can = b->kind == BusKind::socketcan;
     if (b != m.bus && !can) {
       // Refused rather than left out: a recorder on this site would wait for it forever.
-      const std::string why = b->kind == BusKind::modbus_rtu
+      const std::string why = b->kind != BusKind::modbus_tcp || !m.bus
                                   ? "the simulated PLC serves Modbus TCP only"
                                   : "the simulated PLC serves one Modbus TCP bus, '" + m.bus->name +
                                         "' (line " + std::to_string(m.bus->line) + ")";

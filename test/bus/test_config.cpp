@@ -29,7 +29,7 @@ const char* kBus =
 
 TEST_CASE("configs/site.toml: buses, loops and points as written") {
   const SiteConfig s = load_site_config(kConfigs + "/site.toml");
-  REQUIRE(s.buses.size() == 2);
+  REQUIRE(s.buses.size() == 3);
   CHECK(s.buses[0].kind == BusKind::modbus_tcp);
   CHECK(s.buses[0].host == "127.0.0.1");
   CHECK(s.buses[0].port == 5020);
@@ -38,7 +38,11 @@ TEST_CASE("configs/site.toml: buses, loops and points as written") {
   CHECK(s.buses[1].device == "/dev/ttyUSB0");
   CHECK(s.buses[1].parity == 'E');
   CHECK(s.buses[1].pause_s == doctest::Approx(0.02));
-  REQUIRE(s.loops.size() == 2);
+  CHECK(s.buses[2].kind == BusKind::modbus_rtu_over_tcp);  // Telegraf's transmission_mode
+  CHECK(s.buses[2].port == 4001);
+  CHECK(s.buses[2].slave_id == 3);
+  REQUIRE(s.loops.size() == 3);
+  CHECK(s.loops[2].point(PointName::pv).order == ByteOrder::cdab);
   const auto& tic = s.loops[1];
   CHECK(tic.sample_period_s == 1.0);
   CHECK(tic.point(PointName::op).reg == RegisterType::input);
@@ -392,4 +396,84 @@ TEST_CASE("DBC: messages, signals, extended ids, multiplexing, errors with line 
   CHECK(line_of("BO_ 1 M: 8 X\n\n SG_ A : 0|8@1+ (1,0 [0|1] \"\" X\n") == 3);  // missing ')'
   CHECK(line_of("BO_ 4096 M: 8 X\n") == 1);  // 11-bit id too large
   CHECK(line_of("BO_ 1 M: 8 X\nBO_ 2 M: 8 X\n") == 2);
+}
+
+TEST_CASE("Modbus RTU over TCP: protocol, or Telegraf's transmission_mode, and their errors") {
+  const std::string loop =
+      "[[loop]]\nname = \"A\"\nbus = \"gw\"\nsample_period = \"1s\"\n"
+      "op = { address = 0, type = \"FLOAT32\" }\npv = { address = 2, type = \"FLOAT32\" }\n";
+  auto bus_of = [&](const std::string& keys) {
+    return parse_site_config("[[bus]]\nname = \"gw\"\n" + keys + loop, "t.toml").buses.at(0);
+  };
+  // Our spelling, Telegraf's, and both together.
+  for (const char* keys :
+       {"protocol = \"modbus-rtu-over-tcp\"\n", "transmission_mode = \"RTUoverTCP\"\n",
+        "protocol = \"modbus-rtu-over-tcp\"\ntransmission_mode = \"RTUoverTCP\"\n"}) {
+    INFO(keys);
+    const BusConfig b =
+        bus_of(std::string(keys) + "controller = \"tcp://10.0.0.5:4001\"\nslave_id = 3\n");
+    CHECK(b.kind == BusKind::modbus_rtu_over_tcp);
+    CHECK(to_string(b.kind) == "modbus-rtu-over-tcp");
+    CHECK(b.host == "10.0.0.5");
+    CHECK(b.port == 4001);
+    CHECK(b.slave_id == 3);
+  }
+  CHECK(bus_of("transmission_mode = \"RTUoverTCP\"\ncontroller = \"tcp://gw.plant\"\n").port ==
+        502);
+  // Telegraf's other modes name the existing protocols; "auto" goes by the controller.
+  CHECK(bus_of("transmission_mode = \"TCP\"\ncontroller = \"tcp://10.0.0.5:502\"\n").kind ==
+        BusKind::modbus_tcp);
+  CHECK(bus_of("transmission_mode = \"auto\"\ncontroller = \"tcp://10.0.0.5:502\"\n").kind ==
+        BusKind::modbus_tcp);
+  CHECK(bus_of("transmission_mode = \"RTU\"\ncontroller = \"file:///dev/ttyUSB0\"\n").kind ==
+        BusKind::modbus_rtu);
+  CHECK(bus_of("transmission_mode = \"auto\"\ncontroller = \"file:///dev/ttyUSB0\"\n"
+               "baud_rate = 9600\n")
+            .kind == BusKind::modbus_rtu);
+  CHECK(bus_of("protocol = \"modbus-tcp\"\ntransmission_mode = \"TCP\"\n"
+               "controller = \"tcp://10.0.0.5:502\"\n")
+            .kind == BusKind::modbus_tcp);
+
+  auto error = [&](const std::string& keys) {
+    return std::string(error_of("[[bus]]\nname = \"gw\"\n" + keys + loop).what());
+  };
+  CHECK(error("protocol = \"modbus-tcp\"\ntransmission_mode = \"RTUoverTCP\"\n"
+              "controller = \"tcp://10.0.0.5:502\"\n") ==
+        "t.toml:4:21: bus[0].transmission_mode: \"RTUoverTCP\" means protocol "
+        "\"modbus-rtu-over-tcp\", but protocol is \"modbus-tcp\"; keep one of the two");
+  CHECK(error("transmission_mode = \"rtuovertcp\"\ncontroller = \"tcp://10.0.0.5:502\"\n") ==
+        "t.toml:3:21: bus[0].transmission_mode: 'rtuovertcp' must be \"TCP\", \"RTUoverTCP\", "
+        "\"RTU\" or \"auto\" (Telegraf's spellings, case as shown), or remove it and give "
+        "protocol = \"...\"");
+  CHECK(error("transmission_mode = \"ASCIIoverTCP\"\ncontroller = \"tcp://10.0.0.5:502\"\n") ==
+        "t.toml:3:21: bus[0].transmission_mode: Modbus ASCII is not supported; use \"TCP\", "
+        "\"RTUoverTCP\" or \"RTU\"");
+  CHECK(error("transmission_mode = 3\ncontroller = \"tcp://10.0.0.5:502\"\n") ==
+        "t.toml:3:21: bus[0].transmission_mode: must be a string, got an integer");
+  CHECK(error("protocol = \"modbus-rtu-over-tcp\"\ncontroller = \"file:///dev/ttyUSB0\"\n") ==
+        "t.toml:4:14: bus[0].controller: 'file:///dev/ttyUSB0' must look like "
+        "\"tcp://192.168.0.10:502\" (RTU over TCP goes to the gateway's TCP port; a serial line "
+        "on this machine is protocol = \"modbus-rtu\")");
+  CHECK(error("protocol = \"modbus-rtu\"\ncontroller = \"tcp://10.0.0.5:4001\"\n") ==
+        "t.toml:4:14: bus[0].controller: 'tcp://10.0.0.5:4001' must look like "
+        "\"file:///dev/ttyUSB0\" (for a gateway on the network write protocol = "
+        "\"modbus-rtu-over-tcp\" or \"modbus-tcp\")");
+  CHECK(error("transmission_mode = \"RTUoverTCP\"\ncontroller = \"tcp://10.0.0.5:0\"\n") ==
+        "t.toml:4:14: bus[0].controller: port '0' is not 1..65535 (the port the gateway serves "
+        "its serial line on, e.g. 4001)");
+  CHECK(error("transmission_mode = \"RTUoverTCP\"\ncontroller = \"tcp://10.0.0.5:4001\"\n"
+              "baud_rate = 9600\n") ==
+        "t.toml:5:13: bus[0].baud_rate: does not apply to RTU over TCP: the gateway sets its "
+        "serial line; remove it");
+  CHECK(error("protocol = \"socketcan\"\ntransmission_mode = \"RTU\"\ninterface = \"can0\"\n") ==
+        "t.toml:4:21: bus[0].transmission_mode: only applies to Modbus buses; remove it");
+  CHECK(error("protocol = \"modbus-ascii\"\ncontroller = \"tcp://10.0.0.5:502\"\n") ==
+        "t.toml:3:12: bus[0].protocol: 'modbus-ascii' is not a protocol; use modbus-tcp, "
+        "modbus-rtu, modbus-rtu-over-tcp or socketcan");
+  CHECK(error("controller = \"tcp://10.0.0.5:502\"\n") ==
+        "t.toml:1:1: bus[0]: missing key 'protocol'; add protocol = \"...\"");
+  CHECK(error("protocol = \"modbus-rtu-over-tcp\"\ncontroller = \"tcp://10.0.0.5:502\"\n"
+              "transmision_mode = \"RTUoverTCP\"\n")
+            .find("bus[0].transmision_mode: unknown key; remove it or use one of: name, protocol, "
+                  "transmission_mode,") != std::string::npos);
 }

@@ -46,7 +46,7 @@ TEST_CASE("bus fuzz corpora and saved crash inputs replay cleanly") {
 
 TEST_CASE("the seeds parse rather than being refused") {
   // Guards the harness: a seed that is refused tests only the error path.
-  for (const char* name : {"site.toml", "sim-site.toml", "can-site.toml"}) {
+  for (const char* name : {"site.toml", "sim-site.toml", "can-site.toml", "rtu_over_tcp.toml"}) {
     std::ifstream in(kFuzz / "corpus" / "site_config" / name);
     std::stringstream ss;
     ss << in.rdbuf();

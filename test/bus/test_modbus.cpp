@@ -280,4 +280,13 @@ TEST_CASE("the simulated PLC refuses a loop on a Modbus bus it does not serve, n
   CHECK_THROWS_WITH_AS(SimPlc(parse_site_config(rtu, "rtu.toml"), SimPlcOptions{1.0, 0}),
                        doctest::Contains("the simulated PLC serves Modbus TCP only"),
                        std::invalid_argument);
+  // RTU over TCP, with no Modbus TCP bus in the file at all.
+  const std::string gw =
+      "[[bus]]\nname = \"g\"\ntransmission_mode = \"RTUoverTCP\"\n"
+      "controller = \"tcp://127.0.0.1:4001\"\n[[loop]]\nname = \"G1\"\nbus = \"g\"\n" +
+      loop;
+  CHECK_THROWS_WITH_AS(SimPlc(parse_site_config(gw, "gw.toml"), SimPlcOptions{1.0, 0}),
+                       doctest::Contains("(modbus-rtu-over-tcp, line 1); the simulated PLC serves "
+                                         "Modbus TCP only"),
+                       std::invalid_argument);
 }

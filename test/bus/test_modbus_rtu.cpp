@@ -20,6 +20,7 @@
 
 #include "bus_test_util.hpp"
 #include "valvediag/drivers/modbus_bus.hpp"
+#include "valvediag/drivers/modbus_rtu_over_tcp.hpp"  // modbus_crc16
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;
@@ -102,17 +103,6 @@ TEST_CASE("Modbus RTU over a pseudo-terminal: values decode, only function code 
 }
 
 namespace {
-
-std::uint16_t crc16(const std::uint8_t* p, std::size_t n) {
-  std::uint16_t crc = 0xFFFF;
-  for (std::size_t i = 0; i < n; ++i) {
-    crc ^= p[i];
-    for (int k = 0; k < 8; ++k)
-      crc = (crc & 1) ? static_cast<std::uint16_t>((crc >> 1) ^ 0xA001)
-                      : static_cast<std::uint16_t>(crc >> 1);
-  }
-  return crc;
-}
 
 // A Modbus RTU device (slave 7) at the end of a pseudo-terminal, reached through a symbolic link
 // as a USB serial adapter is through /dev/serial/by-id: unplug() closes the pty and removes the
@@ -233,7 +223,7 @@ class RtuDevice {
       }
     }
     const std::size_t len = 3 + 2 * static_cast<std::size_t>(n);
-    const std::uint16_t crc = crc16(r, len);
+    const std::uint16_t crc = modbus_crc16(std::span(r, len));
     r[len] = static_cast<std::uint8_t>(crc & 0xff);
     r[len + 1] = static_cast<std::uint8_t>((crc >> 8) ^ (f == Fault::bad_crc ? 0x5A : 0));
     const std::size_t send = f == Fault::truncated ? len - 1 : len + 2;
@@ -289,14 +279,6 @@ struct RtuFixture {
                                      rtu_loop("B", 10, RegisterType::input)};
 };
 
-// One read, its duration checked against a bound far above what it may take (no hang).
-LoopValues timed_read(ModbusBus& bus, std::size_t loop) {
-  const auto t0 = Clock::now();
-  LoopValues v = bus.read(loop);
-  CHECK(std::chrono::duration<double>(Clock::now() - t0).count() < 3.0);
-  return v;
-}
-
 void check_good(const LoopValues& v, double op, double pv) {
   INFO(v.error);
   CHECK(v.error == "");
@@ -313,7 +295,7 @@ TEST_CASE(
     "recovered") {
   RtuFixture fx;
   ModbusBus bus(fx.cfg, fx.loops);
-  check_good(timed_read(bus, 0), 11.0, 111);
+  check_good(test::timed_read(bus, 0), 11.0, 111);
 
   // Each fault hits the loop's first request (holding registers: op); pv comes on its own.
   struct Case {
@@ -331,7 +313,7 @@ TEST_CASE(
     INFO("fault ", static_cast<int>(c.fault));
     const BusStats before = bus.stats();
     fx.dev.fault(c.fault);
-    LoopValues v = timed_read(bus, 0);
+    LoopValues v = test::timed_read(bus, 0);
     CHECK(v[PointName::op].quality == Quality::comm_error);
     CHECK(std::isnan(v[PointName::op].value));
     CHECK(v[PointName::pv].quality == Quality::good);
@@ -340,7 +322,7 @@ TEST_CASE(
     const BusStats after = bus.stats();
     CHECK(after.*(c.counter) == before.*(c.counter) + 1);
     CHECK(after.errors == before.errors + 1);
-    check_good(timed_read(bus, 0), 11.0, 111);  // the next read is clean
+    check_good(test::timed_read(bus, 0), 11.0, 111);  // the next read is clean
   }
   CHECK(bus.stats().disconnects == 0);  // a fault on the line is not a lost link
   CHECK(fx.dev.count(3) >= 9);
@@ -356,58 +338,43 @@ TEST_CASE("Modbus RTU: a reply later than the timeout is never taken for the nex
   fx.loops = {rtu_loop("A", 0, RegisterType::holding), rtu_loop("B", 10, RegisterType::holding)};
   {
     ModbusBus bus(fx.cfg, fx.loops);
-    check_good(timed_read(bus, 0), 11.0, 111);
+    check_good(test::timed_read(bus, 0), 11.0, 111);
     // A's holding reply comes 0.4 s after the request, 0.1 s after the driver gave up. Modbus
     // RTU has no transaction id: read at once, B (same layout) would get A's late reply.
     fx.dev.fault(RtuDevice::Fault::delay, 1, 0.4);
-    const LoopValues a = timed_read(bus, 0);
+    const LoopValues a = test::timed_read(bus, 0);
     CHECK(a[PointName::op].quality == Quality::comm_error);
     CHECK(bus.stats().timeouts == 1);
-    check_good(timed_read(bus, 1), 22.0, 222);
-    check_good(timed_read(bus, 0), 11.0, 111);
-    check_good(timed_read(bus, 1), 22.0, 222);
+    check_good(test::timed_read(bus, 1), 22.0, 222);
+    check_good(test::timed_read(bus, 0), 11.0, 111);
+    check_good(test::timed_read(bus, 1), 22.0, 222);
   }
   // With a retry the late reply is dropped and the second attempt answers the read.
   fx.cfg.retries = 1;
   ModbusBus bus(fx.cfg, fx.loops);
-  check_good(timed_read(bus, 1), 22.0, 222);
+  check_good(test::timed_read(bus, 1), 22.0, 222);
   fx.dev.fault(RtuDevice::Fault::delay, 1, 0.4);
-  check_good(timed_read(bus, 0), 11.0, 111);
+  check_good(test::timed_read(bus, 0), 11.0, 111);
   CHECK(bus.stats().timeouts == 1);
   CHECK(bus.stats().requests == 3);  // B once, A twice
-  check_good(timed_read(bus, 1), 22.0, 222);
+  check_good(test::timed_read(bus, 1), 22.0, 222);
   CHECK(fx.dev.other_than_3_and_4() == 0);
 }
 
 TEST_CASE("Modbus RTU: the serial adapter unplugged and plugged back") {
   RtuFixture fx;
   ModbusBus bus(fx.cfg, fx.loops);
-  check_good(timed_read(bus, 0), 11.0, 111);
+  check_good(test::timed_read(bus, 0), 11.0, 111);
   fx.dev.unplug();
   // Away: every read fails fast with the device named; no hang, no reconnection storm.
-  int failed = 0;
-  const auto away_until = Clock::now() + std::chrono::milliseconds(600);
-  while (Clock::now() < away_until) {
-    const LoopValues v = timed_read(bus, 0);
-    CHECK(v[PointName::op].quality == Quality::comm_error);
-    CHECK(v[PointName::pv].quality == Quality::comm_error);
-    CHECK(v.error.find(fx.link.string()) != std::string::npos);
-    ++failed;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  CHECK(failed >= 3);
-  BusStats st = bus.stats();
-  CHECK(st.disconnects >= 1);
-  CHECK(!st.connected);
-  CHECK(st.last_error.find("No such file or directory") != std::string::npos);
-  CHECK(st.connect_attempts <= 12);  // backoff: 50, 100, 200, 200 ... ms
+  test::check_reads_while_away(bus, 0, fx.link.string(), "No such file or directory");
   fx.dev.set_values(0, 33.0, 333);
   fx.dev.plug();
   // Back: within the backoff cap (0.2 s) plus a read, polled with a generous deadline.
   LoopValues v;
-  CHECK(test::wait_for([&] { return (v = timed_read(bus, 0)).error.empty(); }, 10.0));
+  CHECK(test::wait_for([&] { return (v = test::timed_read(bus, 0)).error.empty(); }, 10.0));
   check_good(v, 33.0, 333);
-  st = bus.stats();
+  const BusStats st = bus.stats();
   CHECK(st.connected);
   CHECK(st.reconnects == 1);
   CHECK(fx.dev.other_than_3_and_4() == 0);

@@ -37,7 +37,8 @@ inline std::string run_site_config(std::string_view text) {
   };
   for (std::size_t i = 0; i < s.buses.size(); ++i) {
     const BusConfig& b = s.buses[i];
-    if (b.kind == BusKind::modbus_tcp && (b.port < 1 || b.port > 65535))
+    if ((b.kind == BusKind::modbus_tcp || b.kind == BusKind::modbus_rtu_over_tcp) &&
+        (b.port < 1 || b.port > 65535))
       return "Modbus TCP port outside 1..65535 accepted";
     for (const std::string* v : {&b.host, &b.device, &b.interface, &b.dbc})
       if (v->find('\0') != std::string::npos) return "NUL in a bus string accepted";

@@ -1,6 +1,6 @@
-// The one small interface every field-bus driver implements (Modbus TCP/RTU, SocketCAN, the
-// simulated plant). It only reads: there is no write in it, so nothing built on it can move a
-// valve.
+// The one small interface every field-bus driver implements (Modbus TCP/RTU/RTU over TCP,
+// SocketCAN, the simulated plant). It only reads: there is no write in it, so nothing built on it
+// can move a valve.
 #pragma once
 
 #include <algorithm>

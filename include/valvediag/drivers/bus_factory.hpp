@@ -1,5 +1,5 @@
-// Builds the driver for one bus of a site: Modbus TCP/RTU or SocketCAN. The only place that
-// knows every driver; the recorder gets buses through this (or through a test's own factory).
+// Builds the driver for one bus of a site: Modbus TCP/RTU/RTU over TCP or SocketCAN. The only place
+// that knows every driver; the recorder gets buses through this (or through a test's own factory).
 #pragma once
 
 #include <memory>

@@ -33,7 +33,8 @@ class SimPlc {
  public:
   // Serves the loops of the config's first modbus-tcp bus (each must have `simulate`) and those
   // of socketcan buses. Throws std::invalid_argument (file:line, the loop and bus named) on a
-  // config it cannot serve: a loop on another Modbus bus (a second modbus-tcp bus, modbus-rtu).
+  // config it cannot serve: a loop on another Modbus bus (a second modbus-tcp bus, modbus-rtu,
+  // modbus-rtu-over-tcp).
   SimPlc(SiteConfig site, SimPlcOptions options);
   ~SimPlc();
   SimPlc(const SimPlc&) = delete;

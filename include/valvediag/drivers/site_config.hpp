@@ -1,8 +1,8 @@
 // Site configuration: the buses of a plant and where each control loop's OP, PV, SP (optional
 // MV, MODE) live on them. Read from TOML (configs/*.toml document every key); field names follow
-// Telegraf's Modbus input (controller, slave_id, register, address, type, byte_order, scale) and
-// DBC files (start_bit, length, factor, offset). Every problem is reported with file, line and
-// what to change before any bus traffic.
+// Telegraf's Modbus input (controller, slave_id, transmission_mode, register, address, type,
+// data_type, byte_order, scale) and DBC files (start_bit, length, factor, offset). Every problem is
+// reported with file, line and what to change before any bus traffic.
 #pragma once
 
 #include <array>
@@ -18,14 +18,16 @@
 
 namespace valvediag {
 
-enum class BusKind : std::uint8_t { modbus_tcp, modbus_rtu, socketcan };
+// modbus_rtu_over_tcp: RTU frames (with CRC, no MBAP header) on a TCP stream, as serial-to-Ethernet
+// gateways pass them on; Telegraf's transmission_mode = "RTUoverTCP".
+enum class BusKind : std::uint8_t { modbus_tcp, modbus_rtu, socketcan, modbus_rtu_over_tcp };
 std::string to_string(BusKind k);
 
 struct BusConfig {
   std::string name;
   BusKind kind = BusKind::modbus_tcp;
   int line = 0;  // where the [[bus]] table starts, for messages
-  // Modbus TCP
+  // Modbus TCP, RTU over TCP
   std::string host = "127.0.0.1";
   int port = 502;
   // Modbus RTU
@@ -34,7 +36,7 @@ struct BusConfig {
   char parity = 'N';  // N, E, O
   int data_bits = 8;
   int stop_bits = 1;
-  // Modbus (both)
+  // Modbus (all three)
   int slave_id = 1;
   double timeout_s = 0.5;        // response timeout per request
   int retries = 1;               // extra attempts of a failed request before the value is flagged
