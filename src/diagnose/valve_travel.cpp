@@ -460,12 +460,21 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   // Friction that explains one part and not the other is no evidence either way (a held-out part
   // with few reversals, or a fit to noise): the closed-loop models decide. "Follows OP" needs
   // friction to fail on both parts, or a band under the resolution.
+  // A share below zero is a friction that tracks the valve worse than following OP does: none,
+  // not a ratio of thousands of per cent.
+  const auto share_text = [](double s) {
+    return 100 * s >= 0.5 ? strprintf("%.0f %%", 100 * s) : std::string("none");
+  };
   if (explains_est != explains_val && above_resolution) {
-    v.summary = strprintf(
-        "the valve-travel test is inconclusive: friction (He's fs %.2f, fd %.2f) explains "
-        "%.0f / %.0f %% of the error a valve that follows OP leaves (estimation / held out), "
-        "above %.0f %% on one part only; the process models decide",
-        v.fs_percent, v.fd_percent, 100 * share_est, 100 * share_val, 100 * opt.min_error_share);
+    v.summary =
+        strprintf(
+            "the valve-travel test is inconclusive: friction (He's fs %.2f, fd %.2f) explains ",
+            v.fs_percent, v.fd_percent) +
+        share_text(share_est) + " / " + share_text(share_val) +
+        strprintf(
+            " of the error a valve that follows OP leaves (estimation / held out), above "
+            "%.0f %% on one part only; the process models decide",
+            100 * opt.min_error_share);
     return v;
   }
   v.decided = true;
@@ -491,9 +500,10 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   v.verdict = "no-valve-problem";
   std::string why;
   if (!explains)
-    why =
-        strprintf("friction explains only %.0f / %.0f %% of the error left (estimation / held out)",
-                  100 * share_est, 100 * share_val);
+    why = share_est < 0.005 && share_val < 0.005
+              ? std::string("friction explains none of the error left")
+              : "friction explains only " + share_text(share_est) + " / " + share_text(share_val) +
+                    " of the error left (estimation / held out)";
   else
     why = strprintf("its band, %.2f %% of travel, is under %.2f %%", band * to_pct,
                     opt.min_band_percent);
