@@ -721,6 +721,18 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (!std::isfinite(bv) || !std::isfinite(wv) || (bv > 0 && bv > wv))
         return a.prediction_bic_change < b.prediction_bic_change;
     }
+    // One supported by its simulated-output gains whose prediction of PV refutes it (its
+    // parameters cost more than they predict), the other not supported but predicting PV clearly
+    // better than the model, held out too: on the path from OP to PV the prediction is the judge
+    // (closed loop biases the simulated output, above), so the evidence ranks first.
+    if (on_input_path(a.effect) && on_input_path(b.effect) &&
+        !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported != b.supported) {
+      const Finding& s = a.supported ? a : b;
+      const Finding& u = a.supported ? b : a;
+      if (s.prediction_bic_change > 0 && u.prediction_bic_change <= -kPositiveBic &&
+          u.prediction_validation_gain_percent > 0)
+        return &u == &a;
+    }
     // Neither supported by its gains: the one the prediction of PV shows evidence for ranks
     // above one it cannot show (a load or an integrator: their trials keep the valve position,
     // so their predictions are the model's), when that evidence holds on the held-out part.
@@ -1004,7 +1016,11 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
         continue;
       }
     }
-    const Finding& best = f.front();
+    // The most likely missing effect that the data support: an unsupported finding can rank
+    // above it on the prediction's evidence, but the climb adds only what lowers the error on
+    // both parts.
+    const auto it = std::find_if(f.begin(), f.end(), [](const Finding& x) { return x.supported; });
+    const Finding& best = it != f.end() ? *it : f.front();
     const double gain = best.gain_percent;
     if (best.score < opt.min_score || !(gain >= opt.min_gain_percent)) {
       if (k + 2 <= opt.max_steps) {

@@ -60,7 +60,8 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   if (const std::string jn = judge_note(s); !jn.empty()) o << "judge:     " << jn << "\n";
   // The order is rank_by_wins' (diagnosis.cpp), not the score's: say what it is.
   o << "findings (most likely missing first: between valve and process-lag effects alike "
-       "supported, the clearly better one-step prediction of PV (PE BIC); between two "
+       "supported, the clearly better one-step prediction of PV (PE BIC); one that prediction "
+       "shows evidence for above a supported one it refutes (PE BIC above 0); between two "
        "unsupported, one that prediction shows evidence for above a load or an integrator; else "
        "a clearly larger gain on both parts, else fewer parameters, else the higher score; a "
        "process lag above an actuator lag that commutes with it):\n";
