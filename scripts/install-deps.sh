@@ -2,7 +2,8 @@
 # Installs the Debian packages valvediag builds and tests against. Only what is missing.
 set -euo pipefail
 pkgs=(cmake g++ make libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
-      libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox libpng-dev)
+      libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox libpng-dev
+      libcpp-httplib-dev)
 # The browser the tests screenshot the pages in (test/report/test_browser.cpp): test.sh's only,
 # not the demo's.
 [ "${VALVEDIAG_TEST_DEPS:-0}" = 1 ] && pkgs+=(chromium fonts-dejavu-core)

@@ -38,6 +38,7 @@ void add_report(CLI::App& app, int& exit_code);
 void add_sweep(CLI::App& app, int& exit_code);
 void add_sweep_merge(CLI::App& app, int& exit_code);
 void add_trend(CLI::App& app, int& exit_code);
+void add_serve(CLI::App& app, int& exit_code);
 
 // A loop read from a recording (--db/--loop of export and fit); --from/--to in seconds. Gaps and
 // unknown names are UsageErrors, too many rows or an absurd value a DataError (exit status 2).

@@ -70,6 +70,7 @@ int main(int argc, char** argv) {
   add_sweep_merge(app, code);
   add_trend(app, code);
   add_import(app, code);
+  add_serve(app, code);
   auto* help = app.add_subcommand("help", "List the commands, or explain one: valvediag help fit");
   std::string topic;
   help->add_option("command", topic, "command to explain");

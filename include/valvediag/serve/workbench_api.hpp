@@ -1,0 +1,99 @@
+// The workbench's JSON API (issue 36, `valvediag serve`): the loops the server was started with,
+// their trends decimated per bucket, their verdicts. Plain requests in, status and JSON out: no
+// sockets here (the CLI puts cpp-httplib in front), so the routing, the bounds and the token are
+// tested without a network.
+//
+// Safety: the API serves only the loops it was given. No endpoint takes a file name, paths are
+// matched segment by segment against the few routes below (anything else, `..` included, is a
+// 404), and nothing here writes a file.
+#pragma once
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "valvediag/io/loop_data.hpp"
+
+namespace valvediag::serve {
+
+struct ServedLoop {
+  std::string name;  // the loop's tag, else the file's stem
+  LoopData data;
+};
+
+// One request as the HTTP layer parsed it: the path already URL-decoded, the query's parameters
+// (a name given twice is kept twice, and refused), the Authorization and Host headers ("" when
+// absent).
+struct ApiRequest {
+  std::string method = "GET";
+  std::string path;
+  std::multimap<std::string, std::string> query;
+  std::string authorization;
+  std::string host;
+};
+
+struct ApiResponse {
+  int status = 200;
+  nlohmann::json body;
+};
+// The body as sent. Text that is not UTF-8 (a decoded path echoed in a 404) is replaced, not
+// thrown on.
+std::string response_text(const ApiResponse& r);
+
+// The JSON of a loop's verdict: the CLI passes the very call `diagnose` makes (loop_verdict()
+// with its options, written by add_verdict_json()), so both give the same verdict.
+using VerdictFunction = std::function<nlohmann::json(const LoopData&)>;
+
+// Bounds of GET /api/loops/{id}/series.
+inline constexpr int kDefaultBuckets = 1000;
+inline constexpr int kMaxBuckets = 10000;
+
+class WorkbenchApi {
+ public:
+  // token: "" serves requests addressed to this machine by name (Host: localhost, 127.x, [::1]:
+  // a web page that rebinds its own name to 127.0.0.1 gets a 403, not the plant's data); the CLI
+  // then binds loopback only. Else every request needs `Authorization: Bearer TOKEN`.
+  WorkbenchApi(std::vector<ServedLoop> loops, VerdictFunction verdict, std::string token = "");
+  // Thread-safe; never throws: a bad request is a 4xx {"error": ...}, a failure inside a 500.
+  ApiResponse handle(const ApiRequest& req) const;
+  std::size_t size() const { return loops_.size(); }
+
+ private:
+  struct Cached {
+    std::mutex compute;  // one computation per loop; other requests for it wait for its result
+    std::mutex value;    // guards `verdict` only: listing the loops never waits for a fit
+    std::optional<nlohmann::json> verdict;
+  };
+  ApiResponse route(const ApiRequest& req) const;
+  nlohmann::json loops_json() const;
+  nlohmann::json verdict_json(std::size_t id) const;
+
+  std::vector<ServedLoop> loops_;
+  VerdictFunction verdict_;
+  std::string token_;
+  std::vector<std::unique_ptr<Cached>> cache_;
+};
+
+// OP, PV and SP (those present) of the samples with from <= t <= to, in at most `buckets`
+// buckets of consecutive samples (fewer when fewer samples): per bucket its first and last time
+// stamp and each signal's min and max over it, so a chart drawn from them shows every spike.
+// Columns: {"from","to","samples","buckets","t":[...],"t_end":[...],"n":[...],
+// "op":{"min":[...],"max":[...]}, "pv":..., "sp":...}. Throws std::invalid_argument when no
+// sample lies in [from, to].
+nlohmann::json decimated_series(const LoopData& d, double from, double to, int buckets);
+
+// 32 hex digits from std::random_device (the kernel's random source on Linux).
+std::string random_token();
+
+// 127.0.0.0/8, ::1 and localhost: addresses only this machine can reach.
+bool is_loopback(const std::string& address);
+// A Host header naming a loopback address, with or without a port ("localhost:8080",
+// "[::1]:8080", "127.0.0.1").
+bool is_loopback_host(const std::string& host);
+
+}  // namespace valvediag::serve

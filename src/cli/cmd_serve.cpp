@@ -1,0 +1,174 @@
+// valvediag serve: the workbench's HTTP server (issue 36). cpp-httplib in front of the JSON API
+// of src/serve (workbench_api.hpp), which holds the routing and the rules; this file only reads
+// the data, binds, prints the address and stops on Ctrl-C.
+#include <sys/socket.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <iostream>
+#include <thread>
+
+#include "commands.hpp"
+#include "data_options.hpp"
+#include "stop_signal.hpp"
+#include "valvediag/serve/workbench_api.hpp"
+#include "valvediag/sweep/loop_verdict.hpp"
+#include "verdict_output.hpp"
+
+// Last: it brings <resolv.h>, whose `_res` macro breaks the Eigen headers included after it.
+#include <httplib.h>
+
+namespace valvediag::cli {
+
+void add_serve(CLI::App& app, int& exit_code) {
+  auto* cmd = app.add_subcommand(
+      "serve", "Serve the loops of data files to the workbench's JSON API on this machine");
+  cmd->footer(
+      "Reads the files as diagnose does and answers, until Ctrl-C:\n"
+      "  GET /api/loops                          the loops: id, name, samples, sample period\n"
+      "  GET /api/loops/ID/series?from=S&to=S&buckets=N   OP, PV, SP min/max per bucket\n"
+      "  GET /api/loops/ID/verdict               the loop's verdict, as diagnose gives it\n"
+      "It binds 127.0.0.1; another --bind needs --token (every request must then send\n"
+      "'Authorization: Bearer TOKEN'). It writes no file. See docs/workbench.md.\n"
+      "Examples:\n"
+      "  valvediag serve loop.csv                 (http://127.0.0.1:8080/api/loops)\n"
+      "  valvediag serve loops/*.csv --port 0     (a free port, printed)\n"
+      "  valvediag serve loop.csv --bind 0.0.0.0 --token");
+  struct Args {
+    std::vector<std::string> files;
+    DataOptions layout;
+    int port = 8080;
+    std::string bind = "127.0.0.1";
+    bool token = false, keep_lead_in = false;
+    double validate = 0.3, min_gain = 2.0;
+    std::string op_range;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("files", a->files, "data files (CSV or .mat), one loop each")->required();
+  add_layout_options(cmd, a->layout);
+  add_op_range_option(cmd, a->op_range);
+  cmd->add_option("--port", a->port, "TCP port; 0 picks a free one (printed)")
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
+  cmd->add_option("--bind", a->bind, "address to listen on; other than loopback needs --token")
+      ->capture_default_str();
+  cmd->add_flag("--token", a->token, "require a random token (printed at start) on every request");
+  cmd->add_option("--validate", a->validate, "verdict: fraction of the record held out")
+      ->capture_default_str();
+  cmd->add_option("--min-gain", a->min_gain, "verdict: smallest fitness gain worth an effect")
+      ->capture_default_str();
+  cmd->add_flag("--keep-lead-in", a->keep_lead_in,
+                "verdict: analyse the whole record, quiet lead-in included");
+  cmd->callback([a, &exit_code] {
+    // Checked before any data is read: a server others can reach without a token would hand
+    // the plant's data to anyone on the network.
+    if (!serve::is_loopback(a->bind) && !a->token)
+      throw UsageError("--bind " + a->bind +
+                       " lets other machines connect: add --token, so that every request must "
+                       "carry the random token printed at start");
+    (void)split_check_shares(a->validate, false);  // the range check diagnose makes
+    const OpRange range = parse_op_range(a->op_range);
+    std::vector<serve::ServedLoop> loops;
+    for (const auto& f : a->files) {
+      DataOptions in = a->layout;
+      in.data = f;
+      std::vector<std::string> notes;
+      LoopData d = load_data(in, notes);
+      for (const auto& n : notes) std::cout << "note: " << f << ": " << n << "\n";
+      std::string name = d.tag.empty() ? std::filesystem::path(f).stem().string() : d.tag;
+      loops.push_back({std::move(name), std::move(d)});
+    }
+    // The very call diagnose makes for its verdict, with the same options and JSON keys.
+    const double validate = a->validate, min_gain = a->min_gain;
+    const bool keep = a->keep_lead_in;
+    serve::VerdictFunction verdict = [=](const LoopData& d) {
+      const LoopVerdict lv = loop_verdict(
+          d, verdict_options(range, validate, keep, d.t.empty() ? 0.0 : d.t.front(), min_gain));
+      nlohmann::json j;
+      add_verdict_json(j, lv);
+      j["verdict_basis"] = verdict_basis(lv);
+      j["analysed_from_s"] = lv.analysed_from_s;
+      return j;
+    };
+    const std::string token = a->token ? serve::random_token() : "";
+    const serve::WorkbenchApi api(std::move(loops), verdict, token);
+
+    httplib::Server srv;
+    auto handler = [&api](const httplib::Request& req, httplib::Response& res) {
+      serve::ApiRequest r;
+      r.method = req.method;
+      r.path = req.path;  // URL-decoded by httplib: "%2e%2e" arrives as ".."
+      for (const auto& [k, v] : req.params) r.query.emplace(k, v);
+      r.authorization = req.get_header_value("Authorization");
+      r.host = req.get_header_value("Host");
+      const serve::ApiResponse out = api.handle(r);
+      res.status = out.status;
+      res.set_content(serve::response_text(out), "application/json");
+    };
+    // Every path and method goes to the API, which refuses what it does not serve ([\s\S]: a
+    // decoded %0a in a path must not fall through to httplib's empty 404).
+    const char* any = R"([\s\S]*)";
+    srv.Get(any, handler);
+    srv.Post(any, handler);
+    srv.Put(any, handler);
+    srv.Patch(any, handler);
+    srv.Delete(any, handler);
+    srv.Options(any, handler);
+    // What httplib refuses itself (a malformed request line, a too long URI) gets a JSON error
+    // too; the API's own errors already have their body.
+    srv.set_error_handler([](const httplib::Request&, httplib::Response& res) {
+      if (res.body.empty())
+        res.set_content(
+            serve::response_text(
+                {res.status, {{"error", "bad request (HTTP " + std::to_string(res.status) + ")"}}}),
+            "application/json");
+    });
+    srv.set_exception_handler(
+        [](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
+          res.status = 500;
+          res.set_content(R"({"error":"internal error"})", "application/json");
+        });
+    srv.set_default_headers({{"Cache-Control", "no-store"}, {"X-Content-Type-Options", "nosniff"}});
+    // httplib's default sets SO_REUSEPORT, with which a second server binds a port already in
+    // use and takes some of its connections: SO_REUSEADDR alone refuses a port in use.
+    srv.set_socket_options([](int sock) {
+      int yes = 1;
+      setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    });
+    srv.set_read_timeout(5, 0);
+    srv.set_write_timeout(5, 0);
+
+    int port = a->port;
+    if (port == 0)
+      port = srv.bind_to_any_port(a->bind);
+    else if (!srv.bind_to_port(a->bind, port))
+      port = -1;
+    if (port <= 0)
+      throw std::runtime_error("cannot listen on " + a->bind + " port " + std::to_string(a->port) +
+                               ": the port is in use or the address is not this machine's");
+    std::atomic<bool>& stop = install_stop_signals();
+    std::atomic<bool> ended{false};
+    std::thread server([&] {
+      srv.listen_after_bind();
+      ended = true;
+    });
+    // stop() only closes a socket listen_after_bind() has started on: a Ctrl-C before that would
+    // leave the join below waiting for ever.
+    while (!srv.is_running() && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    const std::string host = a->bind.find(':') != std::string::npos ? "[" + a->bind + "]" : a->bind;
+    std::cout << "serving " << api.size() << " loop(s) on http://" << host << ":" << port
+              << "/api/loops (Ctrl-C stops)\n";
+    if (!token.empty())
+      std::cout << "token: " << token << "  (send 'Authorization: Bearer " << token << "')\n";
+    std::cout << std::flush;
+    while (!stop && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    // Finishes the requests in progress (a verdict being computed included), then returns.
+    srv.stop();
+    server.join();
+    std::cout << "stopped" << std::endl;
+    exit_code = kOk;
+  });
+}
+
+}  // namespace valvediag::cli

@@ -1,0 +1,234 @@
+// valvediag serve as a user starts it: the binary on a free port, asked over HTTP with
+// cpp-httplib's client. Every wait is bounded; a server left running is killed.
+#include <doctest/doctest.h>
+#include <signal.h>
+
+#include <chrono>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "../common/run_cli.hpp"
+#include "valvediag/io/csv_reader.hpp"
+
+// Last: its <resolv.h> defines `_res`, which breaks Eigen headers included after it.
+#include <httplib.h>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using valvediag::test::run_cli;
+
+namespace {
+
+const fs::path kTmp = VALVEDIAG_TMP;
+
+std::string slurp(const fs::path& p) {
+  std::ifstream f(p);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+// A running `valvediag serve`; killed by the destructor if the test did not stop it.
+struct Server {
+  pid_t pid = -1;
+  fs::path out;
+  int port = 0;
+  std::string token;
+  Server(const std::vector<std::string>& args, const std::string& tag) {
+    out = kTmp / ("serve_" + std::to_string(::getpid()) + "_" + tag + ".txt");
+    std::vector<std::string> full{VALVEDIAG_BIN, "serve"};
+    full.insert(full.end(), args.begin(), args.end());
+    pid = valvediag::test::spawn(full, out);
+    // Its first lines: the address with the port it picked, then the token. (No std::regex:
+    // GCC 12 warns inside it under the sanitizers' -O1, and warnings are errors.)
+    const std::string addr = "http://127.0.0.1:", tok = "token: ";
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (std::chrono::steady_clock::now() < end) {
+      const std::string text = slurp(out);
+      if (const auto a = text.find(addr), slash = text.find('/', a + addr.size());
+          a != std::string::npos && slash != std::string::npos) {
+        port = std::atoi(text.substr(a + addr.size(), slash - a - addr.size()).c_str());
+        if (const auto t = text.find(tok); t != std::string::npos)
+          token = text.substr(t + tok.size(), 32);
+        return;
+      }
+      if (::waitpid(pid, nullptr, WNOHANG) == pid) {
+        pid = -1;
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    if (pid > 0) {  // a constructor that throws runs no destructor: end it here
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, nullptr, 0);
+      pid = -1;
+    }
+    FAIL("valvediag serve did not print its address: " << slurp(out));
+  }
+  // Ctrl-C: its exit status (-1 when it had to be killed).
+  int stop() {
+    if (pid <= 0) return -3;
+    ::kill(pid, SIGINT);
+    const int st = valvediag::test::wait_child(pid, 30.0);
+    pid = -1;
+    return st;
+  }
+  ~Server() {
+    if (pid > 0) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, nullptr, 0);
+    }
+  }
+  httplib::Client client() const {
+    httplib::Client c("127.0.0.1", port);
+    c.set_connection_timeout(5, 0);
+    c.set_read_timeout(120, 0);  // the verdict fits the loop: seconds, more under sanitizers
+    c.set_write_timeout(5, 0);
+    return c;
+  }
+};
+
+json body(const httplib::Result& r) {
+  REQUIRE(r);
+  CHECK(r->get_header_value("Content-Type") == "application/json");
+  return json::parse(r->body);
+}
+
+void check_error(const httplib::Result& r, int status) {
+  REQUIRE(r);
+  CHECK(r->status == status);
+  const json j = body(r);
+  REQUIRE(j.contains("error"));
+  CHECK(!j["error"].get<std::string>().empty());
+  CHECK(r->body.find("root:") == std::string::npos);
+}
+
+// The simulated loop every case serves (made once).
+fs::path loop_csv() {
+  const fs::path csv = kTmp / "serve_paper_ex1.csv";
+  static const bool made = [&] {
+    const auto r = run_cli(VALVEDIAG_BIN,
+                           {"simulate", "--scenario", "paper-ex1", "--seed", "1", "--samples",
+                            "1500", "--out", csv.string()},
+                           kTmp, 60.0);
+    return r.status == 0;
+  }();
+  REQUIRE(made);
+  return csv;
+}
+
+}  // namespace
+
+TEST_CASE("serve answers every endpoint over HTTP and stops on Ctrl-C") {
+  const fs::path csv = loop_csv();
+  valvediag::CsvOptions o;
+  const valvediag::LoopData raw = valvediag::read_loop_csv(csv.string(), o);
+  Server s({csv.string(), "--port", "0"}, "main");
+  REQUIRE(s.port > 0);
+  auto c = s.client();
+
+  const json loops = body(c.Get("/api/loops"));
+  REQUIRE(loops["loops"].size() == 1);
+  CHECK(loops["loops"][0]["id"] == 0);
+  CHECK(loops["loops"][0]["name"] == "serve_paper_ex1");
+  CHECK(loops["loops"][0]["samples"] == raw.size());
+
+  // Each bucket's min and max are the raw data's over the samples it spans.
+  const json ser = body(c.Get("/api/loops/0/series?buckets=50"));
+  REQUIRE(ser["buckets"] == 50);
+  std::size_t covered = 0;
+  for (std::size_t k = 0; k < 50; ++k) {
+    const auto b = std::lower_bound(raw.t.begin(), raw.t.end(), ser["t"][k].get<double>());
+    const auto e = std::upper_bound(raw.t.begin(), raw.t.end(), ser["t_end"][k].get<double>());
+    const auto i0 = b - raw.t.begin(), i1 = e - raw.t.begin();
+    REQUIRE(i1 - i0 == ser["n"][k].get<long>());
+    covered += static_cast<std::size_t>(i1 - i0);
+    for (const auto& [name, x] : {std::pair{"op", &raw.op}, {"pv", &raw.pv}}) {
+      const auto [lo, hi] = std::minmax_element(x->begin() + i0, x->begin() + i1);
+      CHECK(ser[name]["min"][k].get<double>() == doctest::Approx(*lo).epsilon(1e-12));
+      CHECK(ser[name]["max"][k].get<double>() == doctest::Approx(*hi).epsilon(1e-12));
+    }
+  }
+  CHECK(covered == raw.size());
+  const json part = body(c.Get("/api/loops/0/series?from=10&to=20&buckets=3"));
+  CHECK(part["buckets"] == 3);
+  CHECK(part["t"][0].get<double>() >= 10.0);
+  CHECK(part["t_end"][2].get<double>() <= 20.0);
+
+  // The verdict is the one diagnose gives for the same file, and the second answer is cached.
+  const fs::path dj = kTmp / "serve_diagnose.json";
+  const auto diag =
+      run_cli(VALVEDIAG_BIN, {"diagnose", csv.string(), "--json", dj.string(), "--no-history"},
+              kTmp, 300.0);
+  REQUIRE_MESSAGE(diag.status == 0, diag.out);
+  const json want = json::parse(slurp(dj));
+  const json v = body(c.Get("/api/loops/0/verdict"));
+  CHECK(v["verdict"] == want["verdict"]);
+  CHECK(v["verdict_model"] == want["verdict_model"]);
+  CHECK(v["stiction_percent"] == want["stiction_percent"]);
+  CHECK(v["cached"] == false);
+  CHECK(body(c.Get("/api/loops/0/verdict"))["cached"] == true);
+
+  // Bad requests: JSON errors, the server still up afterwards.
+  check_error(c.Get("/api/loops/0/series?buckets=0"), 400);
+  check_error(c.Get("/api/loops/0/series?buckets=10001"), 400);
+  check_error(c.Get("/api/loops/0/series?from=20&to=10"), 400);
+  check_error(c.Get("/api/loops/0/series?from=nan"), 400);
+  check_error(c.Get("/api/loops/1/series"), 404);
+  check_error(c.Get("/api/loops/x/verdict"), 404);
+  check_error(c.Get("/nope"), 404);
+  check_error(c.Post("/api/loops", "{}", "application/json"), 405);
+  check_error(c.Delete("/api/loops/0/verdict"), 405);
+  // Traversal, plain and URL-encoded (httplib decodes the path: the API sees the dots).
+  for (const char* p :
+       {"/api/loops/../../etc/passwd", "/../../../../etc/passwd",
+        "/api/loops/%2e%2e/%2e%2e/etc/passwd", "/api/loops/0/%2e%2e%2f%2e%2e%2fetc%2fpasswd",
+        "/%2e%2e/%2e%2e/etc/passwd", "/api/loops/0/series/..%2f..%2f..%2fetc%2fpasswd",
+        "/api/loops/%00/verdict"}) {
+    CAPTURE(p);
+    check_error(c.Get(p), 404);
+  }
+  // A page that rebound its own name to 127.0.0.1 still sends that name (DNS-rebinding guard).
+  check_error(c.Get("/api/loops", {{"Host", "evil.example:80"}}), 403);
+  CHECK(body(c.Get("/api/loops"))["loops"].size() == 1);
+  // A second server on the same port is refused, not let in beside the first (SO_REUSEPORT).
+  const auto twice =
+      run_cli(VALVEDIAG_BIN, {"serve", csv.string(), "--port", std::to_string(s.port)}, kTmp, 30.0);
+  CHECK(twice.status == 1);
+  CHECK(twice.out.find("cannot listen") != std::string::npos);
+
+  const int st = s.stop();
+  CHECK(st == 0);
+  const std::string out = slurp(s.out);
+  CHECK(out.find("stopped") != std::string::npos);
+}
+
+TEST_CASE("serve --token: 401 without the token, 200 with it") {
+  const fs::path csv = loop_csv();
+  Server s({csv.string(), "--port", "0", "--token"}, "token");
+  REQUIRE(s.port > 0);
+  REQUIRE(s.token.size() == 32);
+  auto c = s.client();
+  check_error(c.Get("/api/loops"), 401);
+  check_error(c.Get("/api/loops", {{"Authorization", "Bearer 0123"}}), 401);
+  const auto ok = c.Get("/api/loops", {{"Authorization", "Bearer " + s.token}});
+  REQUIRE(ok);
+  CHECK(ok->status == 200);
+  CHECK(s.stop() == 0);
+}
+
+TEST_CASE("serve refuses a non-loopback --bind without --token, and bad options") {
+  const fs::path csv = loop_csv();
+  auto r = run_cli(VALVEDIAG_BIN, {"serve", csv.string(), "--bind", "0.0.0.0", "--port", "0"}, kTmp,
+                   30.0);
+  CHECK(r.status == 2);
+  CHECK(r.out.find("--token") != std::string::npos);
+  r = run_cli(VALVEDIAG_BIN, {"serve", csv.string(), "--port", "70000"}, kTmp, 30.0);
+  CHECK(r.status == 2);
+  r = run_cli(VALVEDIAG_BIN, {"serve", (kTmp / "no_such.csv").string(), "--port", "0"}, kTmp, 30.0);
+  CHECK(r.status == 2);
+  r = run_cli(VALVEDIAG_BIN, {"serve"}, kTmp, 30.0);
+  CHECK(r.status == 2);
+}

@@ -1,0 +1,295 @@
+// The workbench's JSON API without sockets: routes, the series' numbers, bounds, the token, the
+// verdict's cache, and paths that try to leave the served data.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+#include "valvediag/serve/workbench_api.hpp"
+
+using namespace valvediag;
+using namespace valvediag::serve;
+using nlohmann::json;
+
+namespace {
+
+// 25,000 samples (the long loop) with one spike in PV that decimation must keep.
+LoopData long_loop() {
+  LoopData d;
+  d.source = "synthetic";
+  for (int i = 0; i < 25000; ++i) {
+    d.t.push_back(100.0 + 0.5 * i);
+    d.op.push_back(50.0 + 20.0 * std::sin(0.001 * i));
+    d.pv.push_back(40.0 + 10.0 * std::sin(0.0013 * i + 1.0) + (i == 12345 ? 500.0 : 0.0));
+    d.sp.push_back(i < 10000 ? 40.0 : 45.0);
+  }
+  return d;
+}
+
+LoopData short_loop() {
+  LoopData d;
+  for (int i = 0; i < 10; ++i) {
+    d.t.push_back(i);
+    d.op.push_back(i);
+    d.pv.push_back(-i);
+  }
+  d.tag = "FIC101";
+  return d;
+}
+
+struct Fixture {
+  std::atomic<int> calls{0};
+  WorkbenchApi api;
+  explicit Fixture(std::string token = "")
+      : api(
+            {{"long", long_loop()}, {"FIC101", short_loop()}},
+            [this](const LoopData& d) {
+              ++calls;
+              return json{{"verdict", d.size() > 100 ? "stiction" : "not-enough-data"}};
+            },
+            std::move(token)) {}
+  ApiResponse get(const std::string& path, std::multimap<std::string, std::string> q = {},
+                  const std::string& auth = "") {
+    ApiRequest r;
+    r.path = path;
+    r.query = std::move(q);
+    r.authorization = auth;
+    return api.handle(r);
+  }
+};
+
+void check_error(const ApiResponse& r, int status) {
+  CHECK(r.status == status);
+  REQUIRE(r.body.is_object());
+  REQUIRE(r.body.contains("error"));
+  CHECK(!r.body["error"].get<std::string>().empty());
+}
+
+}  // namespace
+
+TEST_CASE("GET /api/loops lists the loops it was given") {
+  Fixture f;
+  const auto r = f.get("/api/loops");
+  REQUIRE(r.status == 200);
+  const auto& l = r.body["loops"];
+  REQUIRE(l.size() == 2);
+  CHECK(l[0]["id"] == 0);
+  CHECK(l[0]["name"] == "long");
+  CHECK(l[0]["samples"] == 25000);
+  CHECK(l[0]["sample_period_s"].get<double>() == doctest::Approx(0.5));
+  CHECK(l[0]["start_s"].get<double>() == doctest::Approx(100.0));
+  CHECK(l[0]["signals"] == json::array({"op", "pv", "sp"}));
+  CHECK(l[0]["verdict"].is_null());  // not computed yet
+  CHECK(l[1]["name"] == "FIC101");
+  CHECK(l[1]["signals"] == json::array({"op", "pv"}));
+}
+
+TEST_CASE("series: min and max per bucket are the raw data's over the bucket") {
+  Fixture f;
+  const LoopData d = long_loop();
+  const auto r = f.get("/api/loops/0/series");
+  REQUIRE(r.status == 200);
+  const json& j = r.body;
+  CHECK(j["buckets"] == kDefaultBuckets);
+  CHECK(j["samples"] == 25000);
+  REQUIRE(j["t"].size() == static_cast<std::size_t>(kDefaultBuckets));
+  std::size_t covered = 0;
+  for (std::size_t k = 0; k < j["t"].size(); ++k) {
+    const double t0 = j["t"][k], t1 = j["t_end"][k];
+    const auto b = std::lower_bound(d.t.begin(), d.t.end(), t0) - d.t.begin();
+    const auto e = std::upper_bound(d.t.begin(), d.t.end(), t1) - d.t.begin();
+    REQUIRE(e - b == j["n"][k].get<long>());
+    covered += static_cast<std::size_t>(e - b);
+    for (const auto& [name, x] : {std::pair{"op", &d.op}, {"pv", &d.pv}, {"sp", &d.sp}}) {
+      const auto [lo, hi] = std::minmax_element(x->begin() + b, x->begin() + e);
+      CHECK(j[name]["min"][k].get<double>() == *lo);
+      CHECK(j[name]["max"][k].get<double>() == *hi);
+      CHECK(j[name]["min"][k].get<double>() <= j[name]["max"][k].get<double>());
+    }
+  }
+  CHECK(covered == 25000);  // every sample in exactly one bucket
+  // The one-sample spike survives decimation.
+  double top = 0;
+  for (const auto& v : j["pv"]["max"]) top = std::max(top, v.get<double>());
+  CHECK(top > 500.0);
+}
+
+TEST_CASE("series: from, to and buckets") {
+  Fixture f;
+  auto r = f.get("/api/loops/0/series", {{"from", "200"}, {"to", "300"}, {"buckets", "7"}});
+  REQUIRE(r.status == 200);
+  CHECK(r.body["samples"] == 201);  // t = 200, 200.5, ..., 300
+  CHECK(r.body["buckets"] == 7);
+  CHECK(r.body["t"][0].get<double>() == 200.0);
+  CHECK(r.body["t_end"][6].get<double>() == 300.0);
+  // More buckets than samples: one sample each.
+  r = f.get("/api/loops/1/series", {{"buckets", "10000"}});
+  REQUIRE(r.status == 200);
+  CHECK(r.body["buckets"] == 10);
+  CHECK(r.body["pv"]["min"][3].get<double>() == -3.0);
+  CHECK(!r.body.contains("sp"));
+}
+
+TEST_CASE("series: bad queries are 400 with a message") {
+  Fixture f;
+  using Q = std::multimap<std::string, std::string>;
+  for (const Q& q :
+       {Q{{"buckets", "0"}}, Q{{"buckets", "10001"}}, Q{{"buckets", "abc"}}, Q{{"buckets", "-5"}},
+        Q{{"buckets", "1.5"}}, Q{{"buckets", ""}}, Q{{"buckets", "99999999999999999999"}},
+        Q{{"from", "nan"}}, Q{{"from", "inf"}}, Q{{"to", "1e999"}}, Q{{"from", "12abc"}},
+        Q{{"from", ""}}, Q{{"from", "300"}, {"to", "200"}}, Q{{"from", "300"}, {"to", "300"}},
+        Q{{"from", "1e9"}}, Q{{"to", "5"}}, Q{{"from", "1"}, {"from", "2"}}, Q{{"path", "/etc"}}}) {
+    CAPTURE(q.begin()->first);
+    CAPTURE(q.begin()->second);
+    check_error(f.get("/api/loops/0/series", q), 400);
+  }
+  check_error(f.get("/api/loops", {{"x", "1"}}), 400);
+}
+
+TEST_CASE("unknown paths, bad ids and traversal are 404; other methods 405") {
+  Fixture f;
+  for (const char* p : {"/",
+                        "",
+                        "/api",
+                        "/api/",
+                        "/api/loops/",
+                        "/api//loops",
+                        "/api/loops/2/series",
+                        "/api/loops/-1/series",
+                        "/api/loops/01x/verdict",
+                        "/api/loops/ 0/series",
+                        "/api/loops/99999999999999999999/series",
+                        "/api/loops/0/series/",
+                        "/api/loops/0/plot",
+                        "/api/loops/../../etc/passwd",
+                        "/api/loops/0/../../../etc/passwd",
+                        "/api/loops/../series",
+                        "/../../etc/passwd",
+                        "/etc/passwd",
+                        "/api/loops/..%2f..%2fetc",
+                        "/api/loops/0/series\n",
+                        "api/loops"}) {
+    CAPTURE(p);
+    const auto r = f.get(p);
+    check_error(r, 404);
+    CHECK(r.body.dump().find("root:") == std::string::npos);
+  }
+  ApiRequest post;
+  post.method = "POST";
+  post.path = "/api/loops";
+  check_error(f.api.handle(post), 405);
+  // A path that is not UTF-8 is echoed without throwing.
+  CHECK_NOTHROW((void)response_text(f.get("/api/\xff\xfe")));
+}
+
+TEST_CASE("the verdict is computed once and cached, also under concurrent requests") {
+  Fixture f;
+  std::vector<std::thread> th;
+  std::atomic<int> ok{0};
+  for (int i = 0; i < 4; ++i)
+    th.emplace_back([&] {
+      if (f.get("/api/loops/0/verdict").body["verdict"] == "stiction") ++ok;
+    });
+  for (auto& t : th) t.join();
+  CHECK(ok == 4);
+  CHECK(f.calls == 1);
+  const auto r = f.get("/api/loops/0/verdict");
+  CHECK(r.body["cached"] == true);
+  CHECK(r.body["name"] == "long");
+  CHECK(f.calls == 1);
+  CHECK(f.get("/api/loops").body["loops"][0]["verdict"] == "stiction");
+  CHECK(f.get("/api/loops/1/verdict").body["verdict"] == "not-enough-data");
+  CHECK(f.calls == 2);
+}
+
+TEST_CASE("listing the loops does not wait for a verdict being computed") {
+  std::atomic<bool> release{false}, started{false};
+  WorkbenchApi api({{"x", short_loop()}}, [&](const LoopData&) {
+    started = true;
+    for (int i = 0; i < 1000 && !release; ++i)  // bounded: at most 10 s
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return json{{"verdict", "deadband"}};
+  });
+  ApiRequest v, l;
+  v.path = "/api/loops/0/verdict";
+  l.path = "/api/loops";
+  std::thread th([&] { CHECK(api.handle(v).body["verdict"] == "deadband"); });
+  for (int i = 0; i < 10000 && !started; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  REQUIRE(started);
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto r = api.handle(l);
+  CHECK(std::chrono::steady_clock::now() - t0 < std::chrono::seconds(2));
+  CHECK(r.body["loops"][0]["verdict"].is_null());
+  release = true;
+  th.join();
+  CHECK(api.handle(l).body["loops"][0]["verdict"] == "deadband");
+}
+
+TEST_CASE("a verdict that fails is a 500 JSON error, and tried again next time") {
+  int calls = 0;
+  WorkbenchApi api({{"x", short_loop()}}, [&](const LoopData&) -> json {
+    if (++calls == 1) throw std::runtime_error("boom");
+    return json{{"verdict", "no-valve-problem"}};
+  });
+  ApiRequest r;
+  r.path = "/api/loops/0/verdict";
+  const auto first = api.handle(r);
+  check_error(first, 500);
+  CHECK(first.body["error"].get<std::string>().find("boom") != std::string::npos);
+  CHECK(api.handle(r).body["verdict"] == "no-valve-problem");
+}
+
+TEST_CASE("the token: 401 without or with a wrong one, on every path") {
+  Fixture f("s3cret");
+  check_error(f.get("/api/loops"), 401);
+  check_error(f.get("/api/loops", {}, "Bearer wrong"), 401);
+  check_error(f.get("/api/loops", {}, "Bearer s3cre"), 401);
+  check_error(f.get("/api/loops", {}, "s3cret"), 401);
+  check_error(f.get("/no/such/path"), 401);  // paths are not revealed without it
+  CHECK(f.get("/api/loops", {}, "Bearer s3cret").status == 200);
+  check_error(f.get("/no/such/path", {}, "Bearer s3cret"), 404);
+}
+
+TEST_CASE("without a token, only requests addressed to this machine are served") {
+  Fixture f;
+  ApiRequest r;
+  r.path = "/api/loops";
+  for (const char* h : {"", "localhost", "localhost:8080", "127.0.0.1:5", "[::1]:8080", "::1"}) {
+    r.host = h;
+    CAPTURE(r.host);
+    CHECK(f.api.handle(r).status == 200);
+  }
+  // A page whose name was rebound to 127.0.0.1 still sends its own name.
+  for (const char* h : {"evil.example:8080", "127.0.0.1.evil.example", "[::1]x", "10.0.0.1"}) {
+    r.host = h;
+    CAPTURE(r.host);
+    check_error(f.api.handle(r), 403);
+  }
+  // With a token any name may be used: the token is the guard.
+  Fixture t("s3cret");
+  r.host = "plant-laptop:8080";
+  r.authorization = "Bearer s3cret";
+  CHECK(t.api.handle(r).status == 200);
+}
+
+TEST_CASE("random tokens and loopback addresses") {
+  const std::string a = random_token(), b = random_token();
+  CHECK(a.size() == 32);
+  CHECK(a.find_first_not_of("0123456789abcdef") == std::string::npos);
+  CHECK(a != b);
+  CHECK(is_loopback("127.0.0.1"));
+  CHECK(is_loopback("::1"));
+  CHECK(is_loopback("localhost"));
+  CHECK(!is_loopback("0.0.0.0"));
+  CHECK(!is_loopback("192.168.1.5"));
+  CHECK(!is_loopback("::"));
+  CHECK(is_loopback("127.1.2.3"));
+  CHECK(!is_loopback("127.0.0.1.evil.example"));
+  CHECK(!is_loopback("127.0.0.256"));
+  CHECK(is_loopback_host("localhost:1"));
+  CHECK(!is_loopback_host("[::1"));
+}
