@@ -166,6 +166,9 @@ void add_serve(CLI::App& app, int& exit_code) {
     // Finishes the requests in progress (a verdict being computed included), then returns.
     srv.stop();
     server.join();
+    if (!stop)  // the listening loop ended without being asked to: not a clean stop
+      throw std::runtime_error("the server stopped listening on " + a->bind + " port " +
+                               std::to_string(port) + " unexpectedly");
     std::cout << "stopped" << std::endl;
     exit_code = kOk;
   });
