@@ -104,14 +104,25 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const Hi
               << (h.empty() ? " (no history yet)" : "") << "\n";
   }
   for (const auto& e : a.add) {
+    // Already there as given (the default model is `preisach`): the fit is what was asked for.
+    if (const EffectSpec* have = spec.find(parse_effect(e).name);
+        have && *have == parse_effect(e)) {
+      std::cout << "note: " << to_string(*have) << " is already in the model: fitting it again\n";
+      continue;
+    }
     std::vector<EffectSpec> replaced;
     spec = add_effect(spec, e, &replaced);
     if (replaced.empty()) continue;
     std::string names;  // "stiction", "stiction and deadband"
     for (std::size_t i = 0; i < replaced.size(); ++i)
       names += (i ? " and " : "") + to_string(replaced[i]);
+    const bool narrower = replaced.front().name == "preisach";
     std::cout << "note: " << to_string(parse_effect(e)) << " replaces " << names
-              << (replaced.size() == 1 ? " (it generalizes it)" : " (it generalizes them)") << "\n";
+              << (narrower               ? " (the Preisach weights combine with no other valve "
+                                           "effect; the ladder keeps both to compare)"
+                  : replaced.size() == 1 ? " (it generalizes it)"
+                                         : " (it generalizes them)")
+              << "\n";
   }
   for (const auto& e : a.remove) spec = remove_effect(spec, e);
   if (a.output == "mv")

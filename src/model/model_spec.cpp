@@ -180,17 +180,17 @@ bool preisach_generalizes(std::string_view name) {
 ModelSpec add_effect(const ModelSpec& spec, std::string_view effect,
                      std::vector<EffectSpec>* replaced) {
   const EffectSpec e = parse_effect(effect);
-  if (preisach_generalizes(e.name) && spec.has("preisach")) {
-    ModelSpec narrower = spec;
-    for (auto& have : narrower.effects)
-      if (have.name == "preisach") have = e;
-    throw ModelSpecError("'preisach' already covers '" + e.name +
-                         "' (it generalizes stiction and deadband); to fit the narrower model "
-                         "instead, give it whole: --model " +
-                         to_string(normalized(std::move(narrower))));
-  }
   ModelSpec out = spec;
   std::vector<EffectSpec> gone;
+  // A valve effect added to a Preisach model takes its place: the Preisach weights combine with
+  // no other valve block (they already represent friction, backlash, limits and curvature), and
+  // the user asked for this valve model; the ladder keeps both to compare.
+  if (e.name != "preisach" && find_effect(e.name)->stage == EffectStage::Valve) {
+    const auto hysteresis = [](const EffectSpec& h) { return h.name == "preisach"; };
+    std::copy_if(out.effects.begin(), out.effects.end(), std::back_inserter(gone), hysteresis);
+    out.effects.erase(std::remove_if(out.effects.begin(), out.effects.end(), hysteresis),
+                      out.effects.end());
+  }
   if (e.name == "preisach") {
     // The wider hysteresis model takes the narrower one's place.
     const auto narrower = [](const EffectSpec& h) { return preisach_generalizes(h.name); };

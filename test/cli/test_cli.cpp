@@ -11,6 +11,7 @@
 #include <string>
 
 #include "../common/sanitized.hpp"
+#include "valvediag/model/model_spec.hpp"
 
 namespace fs = std::filesystem;
 
@@ -501,6 +502,28 @@ TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   CHECK(run("fit " + tmp("db.csv") + hist + " --add wobble").status == 2);
 }
 
+// The workflow from any start (issue 35): a plain `fit` (the Preisach model), then
+// `fit --add EFFECT` for every effect of the vocabulary, each from that fit: none is refused.
+TEST_CASE("after a plain fit, fit --add works for every effect" * valvediag::test::release_only()) {
+  const std::string csv = tmp("every.csv");
+  REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --samples 1200 --out " + csv).status == 0);
+  const std::string first = tmp("every.history.json");
+  std::filesystem::remove(first);
+  const auto plain = run("fit " + csv + kSmallGrid + "--history " + first);
+  REQUIRE(plain.status == 0);
+  for (const auto& info : valvediag::effect_vocabulary()) {
+    const std::string hist = tmp("every-" + info.name + ".history.json");
+    std::filesystem::copy_file(first, hist, std::filesystem::copy_options::overwrite_existing);
+    const auto r = run("fit " + csv + kSmallGrid + "--history " + hist + " --add " + info.name);
+    INFO(info.name << ": " << r.out);
+    CHECK(r.status == 0);
+    CHECK(r.out.find("starting from the last model of this data: preisach") != std::string::npos);
+    const std::size_t m = r.out.find("\nmodel:     ");
+    REQUIRE(m != std::string::npos);
+    CHECK(r.out.substr(m, r.out.find('\n', m + 1) - m).find(info.name) != std::string::npos);
+  }
+}
+
 TEST_CASE("fit --add preisach replaces stiction or deadband and says so" *
           valvediag::test::release_only()) {
   const std::string csv = tmp("nest.csv");
@@ -540,10 +563,10 @@ TEST_CASE("fit --add preisach replaces stiction or deadband and says so" *
     CHECK(k["findings"][0]["effect"] == "preisach");
     CHECK(k["findings"][0]["trial_model"] == "preisach+delay");
   }
-  // The narrower effect on the wider one is refused, naming the chain to give instead.
+  // The narrower effect on the wider one takes its place and says so.
   auto narrow = run("fit " + csv + " --model preisach --add stiction --no-history");
-  CHECK(narrow.status == 2);
-  CHECK(narrow.out.find("'preisach' already covers 'stiction' (it generalizes stiction and "
-                        "deadband); to fit the narrower model instead, give it whole: --model "
-                        "stiction") != std::string::npos);
+  CHECK(narrow.status == 0);
+  CHECK(narrow.out.find("note: stiction replaces preisach (the Preisach weights combine with no "
+                        "other valve effect") != std::string::npos);
+  CHECK(narrow.out.find("model:     stiction") != std::string::npos);
 }

@@ -120,7 +120,7 @@ TEST_CASE("preisach replaces the stiction or deadband it generalizes, and says w
   CHECK(replaced.empty());
 }
 
-TEST_CASE("preisach beside what it does not generalize, or a narrower effect on preisach, throws") {
+TEST_CASE("preisach beside what it does not generalize throws; a valve effect on it replaces it") {
   auto message = [](const char* spec, const char* effect) {
     try {
       add_effect(parse_model_spec(spec), effect);
@@ -129,13 +129,24 @@ TEST_CASE("preisach beside what it does not generalize, or a narrower effect on 
     }
     return std::string("no error");
   };
-  // The narrower model on the wider one: refused, with the chain to give instead.
-  CHECK(message("preisach+integrator", "stiction") ==
-        "'preisach' already covers 'stiction' (it generalizes stiction and deadband); to fit the "
-        "narrower model instead, give it whole: --model stiction+integrator");
-  CHECK(message("preisach", "deadband").find("--model deadband") != std::string::npos);
-  CHECK(message("preisach", "stiction:stenman").find("--model stiction:stenman") !=
-        std::string::npos);
+  // A valve effect on a Preisach model takes its place, and says what it replaced.
+  {
+    std::vector<EffectSpec> gone;
+    CHECK(to_string(add_effect(parse_model_spec("preisach+integrator"), "stiction", &gone)) ==
+          "stiction+integrator");
+    REQUIRE(gone.size() == 1);
+    CHECK(gone[0].name == "preisach");
+    CHECK(to_string(add_effect(parse_model_spec("preisach"), "deadband")) == "deadband");
+    CHECK(to_string(add_effect(parse_model_spec("preisach"), "stiction:stenman")) ==
+          "stiction:stenman");
+    CHECK(to_string(add_effect(parse_model_spec("preisach:general+delay"), "saturation", &gone)) ==
+          "saturation+delay");
+    CHECK(gone.size() == 1);
+    CHECK(message("preisach", "actuator-lag") == "no error");
+    // A process effect stays beside it.
+    CHECK(to_string(add_effect(parse_model_spec("preisach"), "order", &gone)) == "preisach+order");
+    CHECK(gone.empty());
+  }
   // Stiction replaced, saturation stays: not combinable, and the spec is left as it was.
   std::vector<EffectSpec> replaced{EffectSpec{"order", ""}};
   const ModelSpec st_sat = parse_model_spec("stiction+saturation");

@@ -74,13 +74,12 @@ std::string to_string(const EffectSpec& effect);
 // another variant switches the variant; adding one already present as given throws.
 // The hysteresis effects nest: `preisach` generalizes `stiction` and `deadband` (the paper's
 // Proposition 1: He's stiction is a Preisach model; so is a backlash), so adding `preisach` to a
-// model with either
-// REPLACES it (both, when both are there); `replaced`, when given, receives what was taken out
-// (empty when nothing was). The other way, adding `stiction` or `deadband` to a model with
-// `preisach`, throws: the wider model covers it already, and swapping to the narrower one is a
-// different model, which the message says how to give (--model with the whole chain).
-// `saturation`, `characteristic` and `actuator-lag` beside `preisach` still throw, as in
-// parse_model_spec: remove them first.
+// model with either REPLACES it (both, when both are there). The other way, any valve effect
+// (`stiction`, `deadband`, `saturation`, `characteristic`, `actuator-lag`) added to a model with
+// `preisach` replaces `preisach`: its weights combine with no other valve block. `replaced`,
+// when given, receives what was taken out (empty when nothing was). Adding `preisach` beside
+// `saturation`, `characteristic` or `actuator-lag` throws, as in parse_model_spec: remove them
+// first.
 ModelSpec add_effect(const ModelSpec& spec, std::string_view effect,
                      std::vector<EffectSpec>* replaced = nullptr);
 // The effects `preisach` replaces when added (stiction, deadband).
