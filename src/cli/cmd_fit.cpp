@@ -104,10 +104,10 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const Hi
               << (h.empty() ? " (no history yet)" : "") << "\n";
   }
   for (const auto& e : a.add) {
+    const EffectSpec added = parse_effect(e);
     // Already there as given (the default model is `preisach`): the fit is what was asked for.
-    if (const EffectSpec* have = spec.find(parse_effect(e).name);
-        have && *have == parse_effect(e)) {
-      std::cout << "note: " << to_string(*have) << " is already in the model: fitting it again\n";
+    if (const EffectSpec* have = spec.find(added.name); have && *have == added) {
+      std::cout << "note: " << to_string(added) << " is already in the model: fitting it again\n";
       continue;
     }
     std::vector<EffectSpec> replaced;
@@ -117,7 +117,7 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const Hi
     for (std::size_t i = 0; i < replaced.size(); ++i)
       names += (i ? " and " : "") + to_string(replaced[i]);
     const bool narrower = replaced.front().name == "preisach";
-    std::cout << "note: " << to_string(parse_effect(e)) << " replaces " << names
+    std::cout << "note: " << to_string(added) << " replaces " << names
               << (narrower               ? " (the Preisach weights combine with no other valve "
                                            "effect; the ladder keeps both to compare)"
                   : replaced.size() == 1 ? " (it generalizes it)"

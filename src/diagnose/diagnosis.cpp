@@ -546,9 +546,11 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     f.trial_validation_fitness_percent = t.validation_fitness_percent;
     f.estimation_gain_percent = finite_or(t.fitness_percent, -1e9) - base_est;
     // Over the samples both simulate: a trial whose structure reaches further back (a long dead
-    // time) starts later, and a fitness over other samples is no comparison.
-    if (t.first_sample != step.fit.first_sample && t.y_sim.size() == y.size() &&
-        step.fit.y_sim.size() == y.size() && t.estimation_end == step.fit.estimation_end) {
+    // time) starts later, and a fitness over other samples is no comparison. (A k-step judge,
+    // below, already scores every fit on the same samples.)
+    if (step.judge.horizon == 0 && t.first_sample != step.fit.first_sample &&
+        t.y_sim.size() == y.size() && step.fit.y_sim.size() == y.size() &&
+        t.estimation_end == step.fit.estimation_end) {
       const std::size_t from = std::max(t.first_sample, step.fit.first_sample);
       if (from + 1 < t.estimation_end)
         f.estimation_gain_percent =
@@ -705,9 +707,11 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     if (const auto it = wider_wins.find({a.effect, b.effect}); it != wider_wins.end())
       return it->second == a.effect;
     if (lags_commute && lag_pair(a, b)) return a.effect == "order";
-    if (on_input_path(a.effect) && on_input_path(b.effect) &&
-        !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported == b.supported &&
-        std::isfinite(a.prediction_bic_change) && std::isfinite(b.prediction_bic_change) &&
+    // Both on the path from OP to PV, not two nested valves with memory: the prediction's pair.
+    const bool path_pair = on_input_path(a.effect) && on_input_path(b.effect) &&
+                           !(is_memory_effect(a.effect) && is_memory_effect(b.effect));
+    if (path_pair && a.supported == b.supported && std::isfinite(a.prediction_bic_change) &&
+        std::isfinite(b.prediction_bic_change) &&
         std::min(a.prediction_bic_change, b.prediction_bic_change) <= -kPositiveBic &&
         std::abs(a.prediction_bic_change - b.prediction_bic_change) > kPositiveBic) {
       // Confirmed on the held-out part, which neither prediction was fitted to: the better one
@@ -725,8 +729,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     // parameters cost more than they predict), the other not supported but predicting PV clearly
     // better than the model, held out too: on the path from OP to PV the prediction is the judge
     // (closed loop biases the simulated output, above), so the evidence ranks first.
-    if (on_input_path(a.effect) && on_input_path(b.effect) &&
-        !(is_memory_effect(a.effect) && is_memory_effect(b.effect)) && a.supported != b.supported) {
+    if (path_pair && a.supported != b.supported) {
       const Finding& s = a.supported ? a : b;
       const Finding& u = a.supported ? b : a;
       if (s.prediction_bic_change > 0 && u.prediction_bic_change <= -kPositiveBic &&

@@ -462,8 +462,9 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   // friction to fail on both parts, or a band under the resolution.
   // A share below zero is a friction that tracks the valve worse than following OP does: none,
   // not a ratio of thousands of per cent.
-  const auto share_text = [](double s) {
-    return 100 * s >= 0.5 ? strprintf("%.0f %%", 100 * s) : std::string("none");
+  const auto none = [](double s) { return 100 * s < 0.5; };
+  const auto share_text = [&none](double s) {
+    return none(s) ? std::string("none") : strprintf("%.0f %%", 100 * s);
   };
   if (explains_est != explains_val && above_resolution) {
     v.summary =
@@ -500,7 +501,7 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
   v.verdict = "no-valve-problem";
   std::string why;
   if (!explains)
-    why = share_est < 0.005 && share_val < 0.005
+    why = none(share_est) && none(share_val)
               ? std::string("friction explains none of the error left")
               : "friction explains only " + share_text(share_est) + " / " + share_text(share_val) +
                     " of the error left (estimation / held out)";

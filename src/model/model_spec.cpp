@@ -182,22 +182,16 @@ ModelSpec add_effect(const ModelSpec& spec, std::string_view effect,
   const EffectSpec e = parse_effect(effect);
   ModelSpec out = spec;
   std::vector<EffectSpec> gone;
-  // A valve effect added to a Preisach model takes its place: the Preisach weights combine with
-  // no other valve block (they already represent friction, backlash, limits and curvature), and
-  // the user asked for this valve model; the ladder keeps both to compare.
-  if (e.name != "preisach" && find_effect(e.name)->stage == EffectStage::Valve) {
-    const auto hysteresis = [](const EffectSpec& h) { return h.name == "preisach"; };
-    std::copy_if(out.effects.begin(), out.effects.end(), std::back_inserter(gone), hysteresis);
-    out.effects.erase(std::remove_if(out.effects.begin(), out.effects.end(), hysteresis),
-                      out.effects.end());
-  }
-  if (e.name == "preisach") {
-    // The wider hysteresis model takes the narrower one's place.
-    const auto narrower = [](const EffectSpec& h) { return preisach_generalizes(h.name); };
-    std::copy_if(out.effects.begin(), out.effects.end(), std::back_inserter(gone), narrower);
-    out.effects.erase(std::remove_if(out.effects.begin(), out.effects.end(), narrower),
-                      out.effects.end());
-  }
+  // What the added effect displaces: `preisach` takes the narrower frictions' place; any other
+  // valve effect takes the Preisach model's (its weights combine with no other valve block: they
+  // already represent friction, backlash, limits and curvature); the ladder keeps both fits.
+  const bool valve = find_effect(e.name)->stage == EffectStage::Valve;
+  const auto displaced = [&e, valve](const EffectSpec& h) {
+    return e.name == "preisach" ? preisach_generalizes(h.name) : valve && h.name == "preisach";
+  };
+  std::copy_if(out.effects.begin(), out.effects.end(), std::back_inserter(gone), displaced);
+  out.effects.erase(std::remove_if(out.effects.begin(), out.effects.end(), displaced),
+                    out.effects.end());
   bool switched = false;
   for (auto& have : out.effects) {
     if (have.name != e.name) continue;
