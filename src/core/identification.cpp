@@ -432,6 +432,7 @@ Split split_of(std::size_t N, const FitOptions& opt) {
   s.N = N;
   s.t0 = static_cast<std::size_t>(std::max({opt.na_max, opt.nk_max + opt.nb_max, 1}));
   if (opt.block == LinearBlock::Identity) s.t0 = 1;
+  s.t0 = std::max(s.t0, opt.first_sample);
   s.end = N;
   if (opt.validation_start > 0) {
     s.end = std::min(opt.validation_start, N);
@@ -625,6 +626,10 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
   if (!(*hi > *lo)) throw std::invalid_argument("the input is constant: nothing to identify");
 
   const Split sp = split_of(u.size(), opt);
+  if (sp.end <
+      sp.t0 + static_cast<std::size_t>(2 * (opt.na_max + opt.nb_max + 1 + 2 * opt.L_max) + 10))
+    throw std::invalid_argument("the first estimation sample " + std::to_string(opt.first_sample) +
+                                " leaves too few estimation samples");
   const bool identity = opt.block == LinearBlock::Identity;
   const RelayDesignOptions dopt = design_options(opt, sp);
   const OutputSums sums = output_sums(y, sp.t0, sp.end, identity ? 0 : opt.na_max);

@@ -521,6 +521,7 @@ ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y
   fo.L_max = opt.preisach_L_max;
   fo.validation_fraction = opt.validation_fraction;
   fo.validation_start = opt.validation_start;
+  fo.first_sample = opt.first_sample;
   fo.threads = opt.threads;
   fo.keep_all_configurations = true;
   const std::vector<double> target = lo.integrating ? difference(y) : y;
@@ -680,6 +681,7 @@ LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, 
   lo.integrating = spec.has("integrator");
   lo.drift = spec.has("disturbance");
   lo.drift_knot_spacing = opt.disturbance_knot_spacing;
+  lo.start = opt.first_sample;
   lo.end = estimation_end(N, opt);
   if (lo.integrating) lo.level_anchor = opt.integrating_horizon;
   return lo;

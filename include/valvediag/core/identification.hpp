@@ -43,6 +43,7 @@ struct FitOptions {
   bool bic_on_simulated_output = false;
   double validation_fraction = 0.0;  // last fraction of samples held out (0: none)
   std::size_t validation_start = 0;  // or: first held-out sample index (0: use the fraction)
+  std::size_t first_sample = 0;      // first estimation sample (0: the largest lag)
   bool select_on_validation = false;
   double umin = 0.0, umax = 0.0;  // Preisach input range; both 0: the OP range of the data
   // Parsimony: among configurations within this many fitness points of the best, the one with the

@@ -35,6 +35,10 @@ struct ModelFitOptions {
   int order_max = 4;                 // na, nb range with `order`
   double validation_fraction = 0.0;  // last fraction held out (0: none)
   std::size_t validation_start = 0;  // or the first held-out sample (0: use the fraction)
+  // First estimation sample (0: the largest lag, the earliest the structure allows). Two models
+  // compared on their fits are fitted on the same samples: one whose structure reaches further
+  // back (a long dead time) starts later, and the other is refitted from there.
+  std::size_t first_sample = 0;
   // Grid: every point of a regular grid (parallel), then a polish from each of the best
   // `polish_starts` points that are not grid neighbours of a better one. DirectL: NLopt's
   // GN_DIRECT_L (sequential), one polish from its best point; also used above 5000 grid points.
