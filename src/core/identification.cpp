@@ -656,6 +656,7 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
     const int nbmax = identity ? 1 : opt.nb_max, nbmin = identity ? 1 : opt.nb_min;
     for (int nk = nkmin; nk <= nkmax; ++nk) {
       for (int na = namin; na <= namax; ++na) {
+        throw_if_cancelled(opt.cancel);
         Eigen::VectorXd prev_b;
         for (int nb = 1; nb <= nbmax; ++nb) {
           // Larger nb starts from the smaller one's b with a zero appended.

@@ -117,7 +117,9 @@ struct Search {
       if (coords[i].profile_points == 0) v.push_back(i);
     return v;
   }
+  const std::atomic<bool>* cancel = nullptr;  // ModelFitOptions::cancel
   double cost(const double* za) {
+    throw_if_cancelled(cancel);  // nlopt_cost keeps it, run_nlopt rethrows it
     ++evaluations;
     std::vector<double> zc = full(za);
     const double c = profile_minimum(coords, profiled, zc, [this](const std::vector<double>& z) {
@@ -437,6 +439,7 @@ void copy_coordinates(Search& to, const Search& from) {
   to.offset = from.offset;
   to.penalty = from.penalty;
   to.profiled = from.profiled;
+  to.cancel = from.cancel;
 }
 
 struct Problem {
@@ -462,6 +465,7 @@ struct Problem {
     s.penalty = 10.0 * den + 1.0;  // fitness about -216 %: worse than any stable fit
     for (std::size_t i = 0; i < s.coords.size(); ++i)
       if (s.coords[i].profile_points > 0) s.profiled.push_back(i);
+    s.cancel = opt.cancel;
   }
   // The valve search scores every candidate with the best linear part over a structure range.
   // `order` and `delay` widen that range; the search scores over the base grid's orders and
@@ -518,6 +522,7 @@ ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y
   fo.nk_min = lo.range.nk_min;
   fo.nk_max = std::min(lo.range.nk_max, kPreisachNkMax);
   fo.L_min = opt.preisach_L_min;
+  fo.cancel = opt.cancel;
   fo.L_max = opt.preisach_L_max;
   fo.validation_fraction = opt.validation_fraction;
   fo.validation_start = opt.validation_start;
@@ -776,6 +781,7 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
                    const ModelSpec& spec, const ModelFitOptions& opt) {
   const auto t_start = std::chrono::steady_clock::now();
   check_problem(u, y, Ts, opt);
+  throw_if_cancelled(opt.cancel);  // between a diagnosis' trial fits
   ModelFit fit;
   fit.spec = spec;
   fit.integrating = spec.has("integrator");

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "valvediag/core/cancel.hpp"
 #include "valvediag/core/hammerstein.hpp"
 #include "valvediag/core/identifiability.hpp"
 #include "valvediag/core/nnls.hpp"
@@ -52,6 +53,8 @@ struct FitOptions {
   double parsimony_percent = 0.1;
   int threads = 0;  // 0: all cores
   bool keep_all_configurations = true;
+  // Set by another thread: identify() throws Cancelled (cancel.hpp) at its next structure.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 // Checks the options alone; returns an empty string when they are usable, otherwise what is wrong.

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "valvediag/core/cancel.hpp"
 #include "valvediag/core/hammerstein.hpp"
 #include "valvediag/model/effect_estimators.hpp"
 #include "valvediag/model/model_spec.hpp"
@@ -61,6 +62,9 @@ struct ModelFitOptions {
   // (ArxEstimator::fit_output_error); 0: least squares only.
   int output_error_iterations = 5;
   int threads = 0;  // 0: all cores (Grid search, preisach, fit_models)
+  // Set by another thread: the fit throws Cancelled (core/cancel.hpp) at its next valve-search
+  // evaluation or identify() structure. Every trial fit of a diagnosis shares DiagnoseOptions::fit.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 // How the solver ended. Impossible problems (bad data, bad options) throw instead.
