@@ -3,10 +3,11 @@
 set -euo pipefail
 pkgs=(cmake g++ make libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
       libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox libpng-dev
-      libcpp-httplib-dev)
-# The browser the tests screenshot the pages in (test/report/test_browser.cpp): test.sh's only,
-# not the demo's.
-[ "${VALVEDIAG_TEST_DEPS:-0}" = 1 ] && pkgs+=(chromium fonts-dejavu-core)
+      libcpp-httplib-dev libjs-dygraphs)
+# The browser the tests screenshot the pages in (test/report/test_browser.cpp) and drive the
+# workbench in over WebDriver (chromium-driver, test/serve/test_workbench_browser.cpp): test.sh's
+# only, not the demo's.
+[ "${VALVEDIAG_TEST_DEPS:-0}" = 1 ] && pkgs+=(chromium chromium-driver fonts-dejavu-core)
 [ "${VALVEDIAG_FUZZ_DEPS:-0}" = 1 ] && pkgs+=(clang libclang-rt-dev)
 missing=()
 for p in "${pkgs[@]}"; do

@@ -3,10 +3,12 @@
 // the data, binds, prints the address and stops on Ctrl-C.
 #include <sys/socket.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <thread>
 
 #include "commands.hpp"
@@ -23,16 +25,20 @@ namespace valvediag::cli {
 
 void add_serve(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
-      "serve", "Serve the loops of data files to the workbench's JSON API on this machine");
+      "serve", "Serve the loops of data files to the workbench (a web page and its JSON API)");
   cmd->footer(
       "Reads the files as diagnose does and answers, until Ctrl-C:\n"
       "  GET /api/loops                          the loops: id, name, samples, sample period\n"
       "  GET /api/loops/ID/series?from=S&to=S&buckets=N   OP, PV, SP min/max per bucket\n"
       "  GET /api/loops/ID/verdict               the loop's verdict, as diagnose gives it\n"
-      "It binds 127.0.0.1; another --bind needs --token (every request must then send\n"
-      "'Authorization: Bearer TOKEN'). It writes no file. See docs/workbench.md.\n"
+      "  POST /api/loops/ID/jobs, GET/DELETE /api/jobs/ID   fit, diagnose, add an effect\n"
+      "  GET /api/loops/ID/ladder, /models/N, /models/N/simulation, /report\n"
+      "  GET /                                   the workbench page (open it in a browser)\n"
+      "It binds 127.0.0.1; another --bind needs --token (open the printed address with\n"
+      "?token=..., or send 'Authorization: Bearer TOKEN'). It writes no file and never talks\n"
+      "to a PLC. See docs/workbench.md.\n"
       "Examples:\n"
-      "  valvediag serve loop.csv                 (http://127.0.0.1:8080/api/loops)\n"
+      "  valvediag serve loop.csv                 (open http://127.0.0.1:8080/)\n"
       "  valvediag serve loops/*.csv --port 0     (a free port, printed)\n"
       "  valvediag serve loop.csv --bind 0.0.0.0 --token");
   struct Args {
@@ -41,6 +47,7 @@ void add_serve(CLI::App& app, int& exit_code) {
     int port = 8080;
     std::string bind = "127.0.0.1";
     bool token = false, keep_lead_in = false;
+    unsigned jobs = 0;
     double validate = 0.3, min_gain = 2.0;
     std::string op_range;
   };
@@ -54,6 +61,8 @@ void add_serve(CLI::App& app, int& exit_code) {
   cmd->add_option("--bind", a->bind, "address to listen on; other than loopback needs --token")
       ->capture_default_str();
   cmd->add_flag("--token", a->token, "require a random token (printed at start) on every request");
+  cmd->add_option("--jobs", a->jobs, "model jobs run at once (0: one per core; at most the cores)")
+      ->capture_default_str();
   cmd->add_option("--validate", a->validate, "verdict: fraction of the record held out")
       ->capture_default_str();
   cmd->add_option("--min-gain", a->min_gain, "verdict: smallest fitness gain worth an effect")
@@ -75,9 +84,15 @@ void add_serve(CLI::App& app, int& exit_code) {
       in.data = f;
       std::vector<std::string> notes;
       LoopData d = load_data(in, notes);
-      for (const auto& n : notes) std::cout << "note: " << f << ": " << n << "\n";
       std::string name = d.tag.empty() ? std::filesystem::path(f).stem().string() : d.tag;
-      loops.push_back({std::move(name), std::move(d)});
+      // The models are fitted to the part diagnose analyses (a quiet lead-in left out).
+      std::optional<LoopData> part;
+      if (d.size() >= 200) {
+        AnalysedPart p = analysed_part(d, a->keep_lead_in, range, notes);
+        if (p.from_s > 0) part = std::move(p.data);
+      }
+      for (const auto& n : notes) std::cout << "note: " << f << ": " << n << "\n";
+      loops.push_back({std::move(name), std::move(d), std::move(part)});
     }
     // The very call diagnose makes for its verdict, with the same options and JSON keys.
     const double validate = a->validate, min_gain = a->min_gain;
@@ -92,7 +107,16 @@ void add_serve(CLI::App& app, int& exit_code) {
       return j;
     };
     const std::string token = a->token ? serve::random_token() : "";
-    const serve::WorkbenchApi api(std::move(loops), verdict, token);
+    serve::ModelOptions mo;
+    mo.validate = validate;
+    mo.min_gain = min_gain;
+    mo.range = range;
+    serve::JobLimits limits;
+    limits.workers = std::max(1u, std::min(a->jobs, std::thread::hardware_concurrency()));
+    // The cores shared out: jobs times threads per fit stay within them.
+    mo.threads = static_cast<int>(
+        std::max(1u, std::max(1u, std::thread::hardware_concurrency()) / limits.workers));
+    const serve::WorkbenchApi api(std::move(loops), verdict, token, mo, limits);
 
     httplib::Server srv;
     auto handler = [&api](const httplib::Request& req, httplib::Response& res) {
@@ -101,10 +125,16 @@ void add_serve(CLI::App& app, int& exit_code) {
       r.path = req.path;  // URL-decoded by httplib: "%2e%2e" arrives as ".."
       for (const auto& [k, v] : req.params) r.query.emplace(k, v);
       r.authorization = req.get_header_value("Authorization");
+      r.cookie = req.get_header_value("Cookie");
       r.host = req.get_header_value("Host");
+      r.content_type = req.get_header_value("Content-Type");
+      r.body = req.body;
       const serve::ApiResponse out = api.handle(r);
       res.status = out.status;
-      res.set_content(serve::response_text(out), "application/json");
+      if (!out.attachment.empty())
+        res.set_header("Content-Disposition", "attachment; filename=\"" + out.attachment + "\"");
+      if (!out.set_cookie.empty()) res.set_header("Set-Cookie", out.set_cookie);
+      res.set_content(serve::response_text(out), serve::response_type(out));
     };
     // Every path and method goes to the API, which refuses what it does not serve ([\s\S]: a
     // decoded %0a in a path must not fall through to httplib's empty 404).
@@ -136,6 +166,7 @@ void add_serve(CLI::App& app, int& exit_code) {
       int yes = 1;
       setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
     });
+    srv.set_payload_max_length(serve::kMaxBody + 1);  // larger bodies: 413 before they are read
     srv.set_read_timeout(5, 0);
     srv.set_write_timeout(5, 0);
 
@@ -157,8 +188,10 @@ void add_serve(CLI::App& app, int& exit_code) {
     // leave the join below waiting for ever.
     while (!srv.is_running() && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     const std::string host = a->bind.find(':') != std::string::npos ? "[" + a->bind + "]" : a->bind;
-    std::cout << "serving " << api.size() << " loop(s) on http://" << host << ":" << port
-              << "/api/loops (Ctrl-C stops)\n";
+    const std::string page = "http://" + host + ":" + std::to_string(port) + "/";
+    std::cout << "serving " << api.size() << " loop(s) on " << page
+              << "api/loops; the workbench: " << page << (token.empty() ? "" : "?token=" + token)
+              << " (Ctrl-C stops)\n";
     if (!token.empty())
       std::cout << "token: " << token << "  (send 'Authorization: Bearer " << token << "')\n";
     std::cout << std::flush;

@@ -4,14 +4,17 @@
 #include <netinet/in.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <random>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
+#include "valvediag/serve/static_files.hpp"
 #include "valvediag/util/utc_time.hpp"
 
 namespace valvediag::serve {
@@ -30,8 +33,10 @@ ApiResponse error(int status, const std::string& message) {
 }
 
 const char* kRoutes =
-    "the API has GET /api/loops, /api/loops/{id}/series?from=S&to=S&buckets=N and "
-    "/api/loops/{id}/verdict";
+    "the workbench has GET / (the page), GET /api/loops, /api/loops/{id}/series?from=S&to=S&"
+    "buckets=N, /api/loops/{id}/verdict, /api/loops/{id}/ladder, /api/loops/{id}/diagnosis, "
+    "/api/loops/{id}/models/{n}, /api/loops/{id}/models/{n}/simulation, /api/loops/{id}/report, "
+    "POST /api/loops/{id}/jobs, GET and DELETE /api/jobs/{id} (docs/workbench.md)";
 
 // The path's segments after the leading '/': "/api/loops/0" -> {api, loops, 0}. Empty segments
 // are kept, so "/api//loops" matches no route.
@@ -108,27 +113,68 @@ json number(double x) {
 }  // namespace
 
 std::string response_text(const ApiResponse& r) {
+  if (!r.content_type.empty()) return r.raw;
   return r.body.dump(-1, ' ', false, json::error_handler_t::replace);
 }
 
+std::string response_type(const ApiResponse& r) {
+  return r.content_type.empty() ? "application/json" : r.content_type;
+}
+
 WorkbenchApi::WorkbenchApi(std::vector<ServedLoop> loops, VerdictFunction verdict,
-                           std::string token)
-    : loops_(std::move(loops)), verdict_(std::move(verdict)), token_(std::move(token)) {
-  for (std::size_t i = 0; i < loops_.size(); ++i) cache_.push_back(std::make_unique<Cached>());
+                           std::string token, ModelOptions models, JobLimits limits)
+    : loops_(std::move(loops)),
+      verdict_(std::move(verdict)),
+      token_(std::move(token)),
+      model_options_(models),
+      jobs_(limits) {
+  for (std::size_t i = 0; i < loops_.size(); ++i) {
+    cache_.push_back(std::make_unique<Cached>());
+    models_.push_back(std::make_unique<LoopModels>());
+  }
+}
+
+WorkbenchApi::~WorkbenchApi() {
+  jobs_.shutdown();
+}
+
+bool WorkbenchApi::authorized(const ApiRequest& req) const {
+  if (same_secret(req.authorization, "Bearer " + token_)) return true;
+  // The page's own requests carry it in the cookie set when /?token=TOKEN was opened.
+  const std::string name = std::string(kTokenCookie) + "=";
+  for (std::size_t b = 0; b < req.cookie.size();) {
+    std::size_t e = req.cookie.find(';', b);
+    if (e == std::string::npos) e = req.cookie.size();
+    std::string c = req.cookie.substr(b, e - b);
+    c.erase(0, c.find_first_not_of(' '));
+    if (c.starts_with(name) && same_secret(c.substr(name.size()), token_)) return true;
+    b = e + 1;
+  }
+  const auto [qb, qe] = req.query.equal_range("token");
+  return qb != qe && std::next(qb) == qe && same_secret(qb->second, token_);
 }
 
 ApiResponse WorkbenchApi::handle(const ApiRequest& req) const {
   // The token first: without it nobody learns even which paths exist.
-  if (!token_.empty() && !same_secret(req.authorization, "Bearer " + token_))
+  if (!token_.empty() && !authorized(req))
     return error(401,
-                 "missing or wrong token: send the header 'Authorization: Bearer TOKEN' with "
-                 "the token valvediag serve printed at start");
+                 "missing or wrong token: open the address valvediag serve printed (it ends in "
+                 "?token=...), or send the header 'Authorization: Bearer TOKEN'");
   if (token_.empty() && !req.host.empty() && !is_loopback_host(req.host))
     return error(403,
                  "this server answers requests addressed to localhost or 127.0.0.1 only, not '" +
                      req.host.substr(0, 100) + "' (serving other names needs --bind ADDR --token)");
   try {
-    return route(req);
+    if (token_.empty() || req.query.count("token") == 0) return route(req);
+    ApiRequest plain = req;  // the token is no parameter of the routes
+    plain.query.erase("token");
+    ApiResponse r = route(plain);
+    // Opening the page with ?token=: its scripts and requests then carry it in a cookie that
+    // other sites' pages cannot send (SameSite=Strict) and scripts cannot read (HttpOnly).
+    if (r.status == 200 && req.path == "/")
+      r.set_cookie =
+          std::string(kTokenCookie) + "=" + token_ + "; Path=/; HttpOnly; SameSite=Strict";
+    return r;
   } catch (const BadRequest& e) {
     return error(400, e.what());
   } catch (const std::exception& e) {
@@ -138,42 +184,214 @@ ApiResponse WorkbenchApi::handle(const ApiRequest& req) const {
   }
 }
 
+namespace {
+
+// The methods a route takes; anything else is a 405 naming them.
+std::optional<ApiResponse> method_check(const ApiRequest& req,
+                                        const std::vector<std::string>& allowed) {
+  for (const auto& m : allowed)
+    if (req.method == m || (m == "GET" && req.method == "HEAD")) return std::nullopt;
+  std::string list;
+  for (const auto& m : allowed) list += (list.empty() ? "" : ", ") + m;
+  return error(405, "method " + req.method.substr(0, 20) + " not allowed on " +
+                        req.path.substr(0, 100) + ": it takes " + list);
+}
+
+// A step number of the ladder: digits only.
+std::optional<std::size_t> step_number(const std::string& s, std::size_t n) {
+  return loop_id(s, n);
+}
+
+// from, to and buckets of /series and /simulation, checked against the time axis t.
+struct Window {
+  double from, to;
+  int buckets;
+};
+Window window(const ApiRequest& req, const std::vector<double>& t, const std::string& what) {
+  only_params(req, {"from", "to", "buckets"}, what + " takes from, to (s) and buckets");
+  const auto from_text = param(req, "from"), to_text = param(req, "to"),
+             buckets_text = param(req, "buckets");
+  const double from = from_text ? finite_number("from", *from_text) : t.front();
+  const double to = to_text ? finite_number("to", *to_text) : t.back();
+  if ((from_text || to_text) && !(from < to))
+    throw BadRequest("'from' must be below 'to' (the record spans " + std::to_string(t.front()) +
+                     " to " + std::to_string(t.back()) + " s)");
+  return {from, to, buckets_text ? bucket_count(*buckets_text) : kDefaultBuckets};
+}
+
+ApiResponse download(std::string body, const std::string& type, const std::string& file) {
+  ApiResponse r;
+  r.raw = std::move(body);
+  r.content_type = type;
+  r.attachment = file;
+  return r;
+}
+
+// A name safe in a Content-Disposition header: letters, digits, '-', '_' and '.'.
+std::string file_stem(const std::string& name) {
+  std::string s;
+  for (char c : name.substr(0, 60))
+    s += std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.' ? c : '_';
+  return s.empty() ? "loop" : s;
+}
+
+}  // namespace
+
 ApiResponse WorkbenchApi::route(const ApiRequest& req) const {
+  // The page and its scripts: exact paths only, from the binary.
+  for (const auto& f : static_files())
+    if (req.path == f.path) {
+      if (auto bad = method_check(req, {"GET"})) return *bad;
+      only_params(req, {}, "the page takes none");
+      ApiResponse r;
+      r.raw = std::string(f.body);
+      r.content_type = std::string(f.content_type);
+      return r;
+    }
   const std::vector<std::string> s = segments(req.path);
-  const bool loops_path = s.size() >= 2 && s[0] == "api" && s[1] == "loops";
-  const bool known =
-      loops_path && (s.size() == 2 || (s.size() == 4 && (s[3] == "series" || s[3] == "verdict")));
-  if (!known) return error(404, "no such endpoint: " + req.path.substr(0, 200) + "; " + kRoutes);
-  if (req.method != "GET" && req.method != "HEAD")
-    return error(405,
-                 "method " + req.method.substr(0, 20) + " not allowed: the API only reads (GET)");
+  const auto not_found = [&] {
+    return error(404, "no such endpoint: " + req.path.substr(0, 200) + "; " + kRoutes);
+  };
+  if (s.size() == 3 && s[0] == "api" && s[1] == "jobs") return job_route(req, s[2]);
+  if (s.size() < 2 || s[0] != "api" || s[1] != "loops") return not_found();
   if (s.size() == 2) {
+    if (auto bad = method_check(req, {"GET"})) return *bad;
     only_params(req, {}, "GET /api/loops takes none");
     return {200, loops_json()};
   }
+  static const std::vector<std::string> kLoopRoutes{"series",    "verdict", "ladder",
+                                                    "diagnosis", "report",  "jobs"};
+  const bool loop_route_known = (s.size() == 4 && std::find(kLoopRoutes.begin(), kLoopRoutes.end(),
+                                                            s[3]) != kLoopRoutes.end()) ||
+                                (s.size() == 5 && s[3] == "models") ||
+                                (s.size() == 6 && s[3] == "models" && s[5] == "simulation");
+  if (!loop_route_known) return not_found();
+  if (auto bad = method_check(req, {s[3] == "jobs" ? "POST" : "GET"})) return *bad;
   const auto id = loop_id(s[2], loops_.size());
   if (!id)
     return error(404, "no loop '" + s[2].substr(0, 40) + "': the loops are numbered 0 to " +
                           std::to_string(static_cast<long>(loops_.size()) - 1) +
                           " (GET /api/loops lists them)");
+  return loop_route(req, s, *id);
+}
+
+ApiResponse WorkbenchApi::loop_route(const ApiRequest& req, const std::vector<std::string>& s,
+                                     std::size_t id) const {
+  const ServedLoop& loop = loops_[id];
+  const LoopModels& models = *models_[id];
+  if (s[3] == "jobs") return submit(req, id);
   if (s[3] == "verdict") {
     only_params(req, {}, "GET /api/loops/{id}/verdict takes none");
-    return {200, verdict_json(*id)};
+    return {200, verdict_json(id)};
   }
-  only_params(req, {"from", "to", "buckets"}, "series takes from, to (s) and buckets");
-  const LoopData& d = loops_[*id].data;
+  if (s[3] == "ladder") {
+    only_params(req, {}, "GET /api/loops/{id}/ladder takes none");
+    json j = ladder_json(models, loop.model_data());
+    j["id"] = id;
+    return {200, std::move(j)};
+  }
+  if (s[3] == "diagnosis") {
+    only_params(req, {}, "GET /api/loops/{id}/diagnosis takes none");
+    const auto d = models.diagnosis();
+    if (!d)
+      return error(404, "loop " + std::to_string(id) + " has no diagnosis yet: POST /api/loops/" +
+                            std::to_string(id) + "/jobs with {\"action\":\"diagnose\"}");
+    json j = d->json;
+    j["id"] = id;
+    return {200, std::move(j)};
+  }
+  if (s[3] == "report") {
+    only_params(req, {}, "GET /api/loops/{id}/report takes none");
+    if (!models.last())
+      return error(404, "loop " + std::to_string(id) +
+                            " has no model yet: fit one first (POST /api/loops/" +
+                            std::to_string(id) + "/jobs with {\"action\":\"diagnose\"})");
+    const std::string verdict = verdict_json(id).value("verdict", std::string());
+    return download(report_html(models, loop.model_data(), loop.name, verdict),
+                    "text/html; charset=utf-8", file_stem(loop.name) + "-report.html");
+  }
+  if (s[3] == "models") {
+    const auto steps = models.steps();
+    const auto n = step_number(s[4], steps.size());
+    if (!n)
+      return error(404, "no model '" + s[4].substr(0, 40) + "' of loop " + std::to_string(id) +
+                            ": its ladder has " + std::to_string(steps.size()) +
+                            " step(s), numbered from 0 (GET /api/loops/" + std::to_string(id) +
+                            "/ladder)");
+    const LoopData& d = loop.model_data();
+    if (s.size() == 6) {
+      const Window w = window(req, d.t, "simulation");
+      json j = simulation_json(*steps[*n], d, w.from, w.to, w.buckets);
+      j["id"] = id;
+      j["step"] = *n;
+      return {200, std::move(j)};
+    }
+    only_params(req, {}, "GET /api/loops/{id}/models/{n} takes none");
+    return download(model_json(*steps[*n], d).dump(2) + "\n", "application/json",
+                    file_stem(loop.name) + "-model-" + std::to_string(*n) + ".json");
+  }
+  const LoopData& d = loop.data;
   if (d.t.empty()) return error(404, "loop " + s[2] + " has no samples");
-  const auto from_text = param(req, "from"), to_text = param(req, "to"),
-             buckets_text = param(req, "buckets");
-  const double from = from_text ? finite_number("from", *from_text) : d.t.front();
-  const double to = to_text ? finite_number("to", *to_text) : d.t.back();
-  if ((from_text || to_text) && !(from < to))
-    throw BadRequest("'from' must be below 'to' (the record spans " + std::to_string(d.t.front()) +
-                     " to " + std::to_string(d.t.back()) + " s)");
-  const int buckets = buckets_text ? bucket_count(*buckets_text) : kDefaultBuckets;
-  json j = decimated_series(d, from, to, buckets);  // no sample in range: invalid_argument
-  j["id"] = *id;
+  const Window w = window(req, d.t, "series");
+  json j = decimated_series(d, w.from, w.to, w.buckets);  // no sample in range: invalid_argument
+  j["id"] = id;
   return {200, std::move(j)};
+}
+
+ApiResponse WorkbenchApi::submit(const ApiRequest& req, std::size_t id) const {
+  only_params(req, {}, "POST /api/loops/{id}/jobs takes a JSON body, no parameters");
+  // JSON only: a form another site's page posts (text/plain, no preflight) is refused.
+  if (!req.content_type.starts_with("application/json"))
+    return error(415, "send the job as JSON with the header 'Content-Type: application/json'");
+  if (req.body.size() > kMaxBody)
+    return error(413, "the body is " + std::to_string(req.body.size()) +
+                          " bytes; a job takes at "
+                          "most " +
+                          std::to_string(kMaxBody));
+  JobRequest jr;
+  try {
+    jr = parse_job_request(json::parse(req.body));
+  } catch (const json::parse_error& e) {
+    throw BadRequest(std::string("the body is not JSON (") + e.what() +
+                     "): send e.g. {\"action\":\"diagnose\"}");
+  } catch (const std::invalid_argument& e) {
+    throw BadRequest(e.what());
+  }
+  json info = jr.info();
+  info["loop"] = id;
+  LoopModels* models = models_[id].get();
+  const LoopData* data = &loops_[id].model_data();
+  std::mutex* busy = &cache_[id]->jobs;
+  const ModelOptions opt = model_options_;
+  const auto job = jobs_.submit(info, [=](JobControl& c) {
+    // One job per loop at a time: each starts from the model the one before left.
+    std::unique_lock<std::mutex> lock(*busy, std::defer_lock);
+    while (!lock.try_lock()) {
+      throw_if_cancelled(c.cancel_flag());
+      c.report(0.0, "waiting for the loop's other job");
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return run_job(jr, *data, *models, opt, c);
+  });
+  if (!job)
+    return error(503, "the job queue is full (" + std::to_string(jobs_.max_queued()) +
+                          " waiting): wait for a job to finish, or cancel one with "
+                          "DELETE /api/jobs/{id}");
+  json j = *jobs_.status(*job);
+  j["job"] = *job;
+  j["url"] = "/api/jobs/" + *job;
+  return {202, std::move(j)};
+}
+
+ApiResponse WorkbenchApi::job_route(const ApiRequest& req, const std::string& id) const {
+  if (auto bad = method_check(req, {"GET", "DELETE"})) return *bad;
+  only_params(req, {}, "/api/jobs/{id} takes none");
+  const auto st = req.method == "DELETE" ? jobs_.cancel(id) : jobs_.status(id);
+  if (!st)
+    return error(404, "no job '" + id.substr(0, 40) +
+                          "': unknown, or finished long ago and forgotten (POST "
+                          "/api/loops/{id}/jobs starts one)");
+  return {200, *st};
 }
 
 json WorkbenchApi::loops_json() const {
@@ -234,39 +452,44 @@ json WorkbenchApi::verdict_json(std::size_t id) const {
 }
 
 json decimated_series(const LoopData& d, double from, double to, int buckets) {
-  const auto b = std::lower_bound(d.t.begin(), d.t.end(), from);
-  const auto e = std::upper_bound(d.t.begin(), d.t.end(), to);
+  std::vector<Column> cols{{"op", &d.op}};
+  if (d.has_pv()) cols.push_back({"pv", &d.pv});
+  if (d.has_sp()) cols.push_back({"sp", &d.sp});
+  return decimated_columns(d.t, cols, from, to, buckets);
+}
+
+json decimated_columns(const std::vector<double>& tt, const std::vector<Column>& columns,
+                       double from, double to, int buckets) {
+  const auto b = std::lower_bound(tt.begin(), tt.end(), from);
+  const auto e = std::upper_bound(tt.begin(), tt.end(), to);
   if (b >= e)
     throw BadRequest("no sample between from=" + std::to_string(from) +
                      " and to=" + std::to_string(to) + " s (the record spans " +
-                     (d.t.empty()
+                     (tt.empty()
                           ? std::string("nothing")
-                          : std::to_string(d.t.front()) + " to " + std::to_string(d.t.back())) +
+                          : std::to_string(tt.front()) + " to " + std::to_string(tt.back())) +
                      " s)");
-  const std::size_t i0 = static_cast<std::size_t>(b - d.t.begin());
+  const std::size_t i0 = static_cast<std::size_t>(b - tt.begin());
   const std::size_t m = static_cast<std::size_t>(e - b);
   const std::size_t nb = std::min<std::size_t>(static_cast<std::size_t>(std::max(buckets, 1)), m);
   struct Signal {
-    const char* name;
-    const std::vector<double>* x;
+    Column c;
     json lo = json::array(), hi = json::array();
   };
   std::vector<Signal> sig;
-  sig.push_back({"op", &d.op});
-  if (d.has_pv()) sig.push_back({"pv", &d.pv});
-  if (d.has_sp()) sig.push_back({"sp", &d.sp});
+  for (const auto& c : columns) sig.push_back({c});
   json t = json::array(), t_end = json::array(), n = json::array();
   for (std::size_t k = 0; k < nb; ++k) {
     // Buckets of consecutive samples, sizes differing by at most one: none is empty.
     const std::size_t lo = i0 + k * m / nb, hi = i0 + (k + 1) * m / nb;
-    t.push_back(d.t[lo]);
-    t_end.push_back(d.t[hi - 1]);
+    t.push_back(tt[lo]);
+    t_end.push_back(tt[hi - 1]);
     n.push_back(hi - lo);
     for (auto& s : sig) {
       double mn = NAN, mx = NAN;  // fmin/fmax skip a missing (NaN) sample
-      for (std::size_t i = lo; i < hi && i < s.x->size(); ++i) {
-        mn = std::fmin(mn, (*s.x)[i]);
-        mx = std::fmax(mx, (*s.x)[i]);
+      for (std::size_t i = lo; i < hi && i < s.c.x->size(); ++i) {
+        mn = std::fmin(mn, (*s.c.x)[i]);
+        mx = std::fmax(mx, (*s.c.x)[i]);
       }
       s.lo.push_back(number(mn));
       s.hi.push_back(number(mx));
@@ -275,7 +498,7 @@ json decimated_series(const LoopData& d, double from, double to, int buckets) {
   json j{{"from", from},     {"to", to},          {"samples", m},
          {"buckets", nb},    {"t", std::move(t)}, {"t_end", std::move(t_end)},
          {"n", std::move(n)}};
-  for (auto& s : sig) j[s.name] = {{"min", std::move(s.lo)}, {"max", std::move(s.hi)}};
+  for (auto& s : sig) j[s.c.name] = {{"min", std::move(s.lo)}, {"max", std::move(s.hi)}};
   return j;
 }
 

@@ -13,8 +13,9 @@
 #include "../common/sanitized.hpp"
 #include "valvediag/io/csv_reader.hpp"
 
-// Last: its <resolv.h> defines `_res`, which breaks Eigen headers included after it.
-#include <httplib.h>
+// Last: it includes <httplib.h>, whose <resolv.h> defines `_res`, which breaks Eigen headers
+// included after it.
+#include "serve_process.hpp"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -24,71 +25,11 @@ namespace {
 
 const fs::path kTmp = VALVEDIAG_TMP;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using valvediag::test::slurp;
 
-// A running `valvediag serve`; killed by the destructor if the test did not stop it.
-struct Server {
-  pid_t pid = -1;
-  fs::path out;
-  int port = 0;
-  std::string token;
-  Server(const std::vector<std::string>& args, const std::string& tag) {
-    out = kTmp / ("serve_" + std::to_string(::getpid()) + "_" + tag + ".txt");
-    std::vector<std::string> full{VALVEDIAG_BIN, "serve"};
-    full.insert(full.end(), args.begin(), args.end());
-    pid = valvediag::test::spawn(full, out);
-    // Its first lines: the address with the port it picked, then the token. (No std::regex:
-    // GCC 12 warns inside it under the sanitizers' -O1, and warnings are errors.)
-    const std::string addr = "http://127.0.0.1:", tok = "token: ";
-    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (std::chrono::steady_clock::now() < end) {
-      const std::string text = slurp(out);
-      if (const auto a = text.find(addr), slash = text.find('/', a + addr.size());
-          a != std::string::npos && slash != std::string::npos) {
-        port = std::atoi(text.substr(a + addr.size(), slash - a - addr.size()).c_str());
-        if (const auto t = text.find(tok); t != std::string::npos)
-          token = text.substr(t + tok.size(), 32);
-        return;
-      }
-      if (::waitpid(pid, nullptr, WNOHANG) == pid) {
-        pid = -1;
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    if (pid > 0) {  // a constructor that throws runs no destructor: end it here
-      ::kill(pid, SIGKILL);
-      ::waitpid(pid, nullptr, 0);
-      pid = -1;
-    }
-    FAIL("valvediag serve did not print its address: " << slurp(out));
-  }
-  // Ctrl-C: its exit status (-1 when it had to be killed).
-  int stop() {
-    if (pid <= 0) return -3;
-    ::kill(pid, SIGINT);
-    const int st = valvediag::test::wait_child(pid, 30.0);
-    pid = -1;
-    return st;
-  }
-  ~Server() {
-    if (pid > 0) {
-      ::kill(pid, SIGKILL);
-      ::waitpid(pid, nullptr, 0);
-    }
-  }
-  httplib::Client client() const {
-    httplib::Client c("127.0.0.1", port);
-    c.set_connection_timeout(5, 0);
-    c.set_read_timeout(120, 0);  // the verdict fits the loop: seconds, more under sanitizers
-    c.set_write_timeout(5, 0);
-    return c;
-  }
+struct Server : valvediag::test::ServeProcess {
+  Server(const std::vector<std::string>& args, const std::string& tag)
+      : ServeProcess(VALVEDIAG_BIN, args, kTmp, tag) {}
 };
 
 json body(const httplib::Result& r) {
@@ -266,4 +207,65 @@ TEST_CASE("serve refuses a non-loopback --bind without --token, and bad options"
   CHECK(r.status == 2);
   r = run_cli(VALVEDIAG_BIN, {"serve"}, kTmp, 30.0);
   CHECK(r.status == 2);
+}
+
+TEST_CASE("serve over HTTP: the page, a job, bad bodies, a client that hangs up") {
+  const fs::path csv = loop_csv();
+  Server s({csv.string(), "--port", "0", "--token"}, "page");
+  REQUIRE(s.port > 0);
+  auto c = s.client();
+  // The page needs the token too; the address printed with ?token= opens it and sets a cookie.
+  check_error(c.Get("/"), 401);
+  const std::string out = slurp(s.out);
+  CHECK(out.find("/?token=" + s.token) != std::string::npos);
+  const auto page = c.Get("/?token=" + s.token);
+  REQUIRE(page);
+  CHECK(page->status == 200);
+  CHECK(page->get_header_value("Content-Type") == "text/html; charset=utf-8");
+  CHECK(page->body.find("/static/dygraph.min.js") != std::string::npos);
+  const std::string cookie = page->get_header_value("Set-Cookie");
+  CHECK(cookie.find("HttpOnly") != std::string::npos);
+  const httplib::Headers with_cookie{{"Cookie", cookie.substr(0, cookie.find(';'))}};
+  const auto js = c.Get("/static/dygraph.min.js", with_cookie);
+  REQUIRE(js);
+  CHECK(js->status == 200);
+  CHECK(js->get_header_value("Content-Type") == "text/javascript; charset=utf-8");
+  CHECK(js->body.size() > 50000);
+
+  // A job over HTTP, and a malformed body: a JSON 400, the server still up.
+  const httplib::Headers auth{{"Authorization", "Bearer " + s.token}};
+  const auto bad = c.Post("/api/loops/0/jobs", auth, "{\"action\":", "application/json");
+  check_error(bad, 400);
+  check_error(c.Post("/api/loops/0/jobs", auth, "{\"action\":\"diagnose\"}", "text/plain"), 415);
+  check_error(c.Post("/api/loops/0/jobs", auth, std::string(200000, '{'), "application/json"), 413);
+  const auto posted = c.Post("/api/loops/0/jobs", auth, R"({"action":"fit","model":"stiction"})",
+                             "application/json");
+  REQUIRE(posted);
+  REQUIRE(posted->status == 202);
+  const std::string job = json::parse(posted->body)["job"];
+  json st;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(300);
+  do {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    st = body(c.Get("/api/jobs/" + job, auth));
+  } while ((st["state"] == "queued" || st["state"] == "running") &&
+           std::chrono::steady_clock::now() < end);
+  CHECK(st["state"] == "done");
+  const auto model = c.Get("/api/loops/0/models/0", auth);
+  REQUIRE(model);
+  CHECK(model->status == 200);
+  CHECK(model->get_header_value("Content-Disposition") ==
+        "attachment; filename=\"serve_paper_ex1-model-0.json\"");
+  CHECK(json::parse(model->body)["model"] == "stiction");
+  check_error(c.Delete("/api/jobs/12345", auth), 404);
+
+  // A client that gives up on a slow answer (a verdict takes seconds) and hangs up: the server
+  // answers the next one.
+  {
+    httplib::Client impatient("127.0.0.1", s.port);
+    impatient.set_read_timeout(0, 50000);
+    (void)impatient.Get("/api/loops/0/verdict", auth);
+  }
+  CHECK(body(c.Get("/api/loops", auth))["loops"].size() == 1);
+  CHECK(s.stop() == 0);
 }

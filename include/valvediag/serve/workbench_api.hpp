@@ -18,32 +18,59 @@
 #include <vector>
 
 #include "valvediag/io/loop_data.hpp"
+#include "valvediag/serve/jobs.hpp"
+#include "valvediag/serve/loop_models.hpp"
 
 namespace valvediag::serve {
 
 struct ServedLoop {
+  ServedLoop(std::string n, LoopData d, std::optional<LoopData> a = std::nullopt)
+      : name(std::move(n)), data(std::move(d)), analysed(std::move(a)) {}
   std::string name;  // the loop's tag, else the file's stem
   LoopData data;
+  // The part the models are fitted to: diagnose's (the CLI leaves a quiet lead-in out, as
+  // diagnose does); nullopt: all of `data`.
+  std::optional<LoopData> analysed;
+  const LoopData& model_data() const { return analysed ? *analysed : data; }
 };
 
 // One request as the HTTP layer parsed it: the path already URL-decoded, the query's parameters
-// (a name given twice is kept twice, and refused), the Authorization and Host headers ("" when
-// absent).
+// (a name given twice is kept twice, and refused), the Authorization, Cookie, Host and
+// Content-Type headers ("" when absent), and the body.
 struct ApiRequest {
   std::string method = "GET";
   std::string path;
   std::multimap<std::string, std::string> query;
   std::string authorization;
+  std::string cookie;
   std::string host;
+  std::string content_type;
+  std::string body;
 };
 
 struct ApiResponse {
+  ApiResponse() = default;
+  ApiResponse(int s, nlohmann::json b) : status(s), body(std::move(b)) {}
   int status = 200;
   nlohmann::json body;
+  // A page, a script or a download instead of JSON: its bytes and type ("" : the JSON body).
+  std::string raw;
+  std::string content_type;
+  std::string attachment;  // a download's file name (Content-Disposition), "" otherwise
+  std::string set_cookie;  // a Set-Cookie value, "" for none
 };
 // The body as sent. Text that is not UTF-8 (a decoded path echoed in a 404) is replaced, not
 // thrown on.
 std::string response_text(const ApiResponse& r);
+// Its Content-Type: `content_type`, else application/json.
+std::string response_type(const ApiResponse& r);
+
+// The cookie the page's requests carry the token in, set when `/?token=TOKEN` is opened.
+inline constexpr const char* kTokenCookie = "valvediag_token";
+
+// Bounds of the jobs: at most `workers` run at once (0: one per core) and max_queued wait; more
+// gets a 503. POST bodies beyond kMaxBody bytes are refused (413).
+inline constexpr std::size_t kMaxBody = 64 * 1024;
 
 // The JSON of a loop's verdict: the CLI passes the very call `diagnose` makes (loop_verdict()
 // with its options, written by add_verdict_json()), so both give the same verdict.
@@ -58,7 +85,10 @@ class WorkbenchApi {
   // token: "" serves requests addressed to this machine by name (Host: localhost, 127.x, [::1]:
   // a web page that rebinds its own name to 127.0.0.1 gets a 403, not the plant's data); the CLI
   // then binds loopback only. Else every request needs `Authorization: Bearer TOKEN`.
-  WorkbenchApi(std::vector<ServedLoop> loops, VerdictFunction verdict, std::string token = "");
+  WorkbenchApi(std::vector<ServedLoop> loops, VerdictFunction verdict, std::string token = "",
+               ModelOptions models = {}, JobLimits limits = {});
+  // Cancels the jobs and waits for them.
+  ~WorkbenchApi();
   // Thread-safe; never throws: a bad request is a 4xx {"error": ...}, a failure inside a 500.
   ApiResponse handle(const ApiRequest& req) const;
   std::size_t size() const { return loops_.size(); }
@@ -68,15 +98,25 @@ class WorkbenchApi {
     std::mutex compute;  // one computation per loop; other requests for it wait for its result
     std::mutex value;    // guards `verdict` only: listing the loops never waits for a fit
     std::optional<nlohmann::json> verdict;
+    std::mutex jobs;  // held by the loop's running job: one at a time per loop
   };
   ApiResponse route(const ApiRequest& req) const;
+  ApiResponse loop_route(const ApiRequest& req, const std::vector<std::string>& s,
+                         std::size_t id) const;
+  ApiResponse job_route(const ApiRequest& req, const std::string& id) const;
+  ApiResponse submit(const ApiRequest& req, std::size_t id) const;
   nlohmann::json loops_json() const;
   nlohmann::json verdict_json(std::size_t id) const;
+  bool authorized(const ApiRequest& req) const;
 
   std::vector<ServedLoop> loops_;
   VerdictFunction verdict_;
   std::string token_;
+  ModelOptions model_options_;
   std::vector<std::unique_ptr<Cached>> cache_;
+  std::vector<std::unique_ptr<LoopModels>> models_;
+  // Last: destroyed first, so no job outlives the loops and models it works on.
+  mutable JobQueue jobs_;
 };
 
 // OP, PV and SP (those present) of the samples with from <= t <= to, in at most `buckets`
@@ -86,6 +126,13 @@ class WorkbenchApi {
 // "op":{"min":[...],"max":[...]}, "pv":..., "sp":...}. Throws std::invalid_argument when no
 // sample lies in [from, to].
 nlohmann::json decimated_series(const LoopData& d, double from, double to, int buckets);
+// The same for any columns on the time axis t: {"pv": &pv, "pv_sim": &sim}.
+struct Column {
+  const char* name;
+  const std::vector<double>* x;
+};
+nlohmann::json decimated_columns(const std::vector<double>& t, const std::vector<Column>& columns,
+                                 double from, double to, int buckets);
 
 // 32 hex digits from std::random_device (the kernel's random source on Linux).
 std::string random_token();

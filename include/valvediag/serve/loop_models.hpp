@@ -1,0 +1,90 @@
+// The workbench's models of one loop: the ladder built in this session (each fit, kept in memory
+// only), the latest diagnosis and the job requests that grow them. The work calls the functions
+// the CLI calls: fit_model (fit --model), add_effect/remove_effect (fit --add/--remove),
+// diagnose/diagnose_auto (diagnose), history_entry (the numbers `ladder` prints), model_fit_json
+// (fit --json) and html_report (report).
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "valvediag/core/op_range.hpp"
+#include "valvediag/diagnose/diagnosis.hpp"
+#include "valvediag/io/loop_data.hpp"
+#include "valvediag/model/model_fit.hpp"
+#include "valvediag/report/model_history.hpp"
+#include "valvediag/serve/jobs.hpp"
+
+namespace valvediag::serve {
+
+// Options of every fit and diagnosis of the session: diagnose's.
+struct ModelOptions {
+  double validate = 0.3;  // held-out share (diagnose --validate)
+  double min_gain = 2.0;  // diagnose --min-gain
+  OpRange range;          // --op-range
+  int threads = 0;        // of each fit (ModelFitOptions::threads); 0: all cores
+  ModelFitOptions fit_options() const;
+  DiagnoseOptions diagnose_options(const LoopData& d) const;
+};
+
+struct ModelStep {
+  std::string action;  // how it came: "fit", "add stiction", "remove deadband", "diagnose"
+  ModelFit fit;
+  ResidualAnalysis where;  // where it fails, on the estimation part
+  HistoryEntry entry;      // its row of the ladder
+};
+
+// What a client asked of a job (POST /api/loops/{id}/jobs).
+struct JobRequest {
+  std::string action;  // fit, add, remove, diagnose
+  std::string model;   // fit: the spec
+  std::string effect;  // add, remove: the effect ("stiction", "deadband:...")
+  bool climb = false;  // diagnose: climb the ladder (diagnose --auto)
+  nlohmann::json info() const;
+};
+// Throws std::invalid_argument naming what is wrong (unknown action or key, a bad model or effect
+// name, a missing field).
+JobRequest parse_job_request(const nlohmann::json& body);
+
+class LoopModels {
+ public:
+  std::vector<std::shared_ptr<const ModelStep>> steps() const;
+  std::shared_ptr<const ModelStep> step(std::size_t n) const;  // nullptr: no such step
+  std::shared_ptr<const ModelStep> last() const;               // nullptr: none yet
+  void push(std::shared_ptr<const ModelStep> s);
+  struct Diagnosed {
+    std::shared_ptr<const Diagnosis> diagnosis;
+    nlohmann::json json;  // diagnose --json's keys (diagnosis_json)
+  };
+  std::optional<Diagnosed> diagnosis() const;
+  void set_diagnosis(Diagnosed d);
+
+ private:
+  mutable std::mutex m_;
+  std::vector<std::shared_ptr<const ModelStep>> steps_;
+  std::optional<Diagnosed> diagnosis_;
+};
+
+// Runs a request on the loop `d` (the part diagnose analyses), grows `models` and returns the
+// job's result. Checks `control` for cancellation; throws Cancelled, or std::invalid_argument when
+// the model cannot be fitted.
+nlohmann::json run_job(const JobRequest& req, const LoopData& d, LoopModels& models,
+                       const ModelOptions& opt, JobControl& control);
+
+// GET /api/loops/{id}/ladder: each step's model and fitness, as `valvediag ladder` prints them.
+nlohmann::json ladder_json(const LoopModels& models, const LoopData& d);
+// GET /api/loops/{id}/models/{n}: `fit --json`'s document of the step.
+nlohmann::json model_json(const ModelStep& s, const LoopData& d);
+// PV, the step's simulated PV and the residual, as the series' min/max buckets.
+nlohmann::json simulation_json(const ModelStep& s, const LoopData& d, double from, double to,
+                               int buckets);
+// The HTML report of the current model (the last step), as `valvediag report` writes it; its
+// diagnosis when the latest one is of that model. Throws std::invalid_argument without a model.
+std::string report_html(const LoopModels& models, const LoopData& d, const std::string& name,
+                        const std::string& verdict);
+
+}  // namespace valvediag::serve

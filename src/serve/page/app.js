@@ -1,0 +1,429 @@
+// The workbench page: plain JavaScript over the JSON API (docs/workbench.md), charts by dygraphs.
+// One loop at a time: its trends, its current model against the data, the findings with an
+// "Add" button each, and the ladder of models fitted in this session.
+'use strict';
+
+const wb = {
+  loops: [],
+  loop: null,       // the loop shown (an entry of /api/loops)
+  ladder: [],       // its steps
+  shown: null,      // the ladder step drawn against the data
+  job: null,        // the page's running job id
+  charts: {},
+  window: null,     // [from, to] zoomed, null: the whole record
+  history: [],      // the jobs this page ran, how each ended
+};
+window.wb = wb;  // for the browser test and the curious
+
+const $ = (id) => document.getElementById(id);
+
+function fmt(x, digits = 1) {
+  return x === null || x === undefined || !isFinite(x) ? '-' : Number(x).toFixed(digits);
+}
+
+function signed(x, digits = 1) {
+  if (x === null || x === undefined || !isFinite(x)) return '';
+  return (x > 0 ? '+' : '') + Number(x).toFixed(digits);
+}
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === 'class') e.className = v;
+    else if (k.startsWith('data-')) e.setAttribute(k, v);
+    else e[k] = v;
+  }
+  for (const c of children) e.append(c);
+  return e;
+}
+
+function showError(text) {
+  $('error').textContent = text;
+  $('error').hidden = !text;
+}
+
+// GET or send JSON; resolves to the parsed body, rejects with the API's error message.
+async function api(path, options = {}) {
+  const r = await fetch(path, options);
+  const body = await r.json().catch(() => ({}));
+  if (!r.ok) {
+    const err = new Error(body.error || r.status + ' ' + r.statusText);
+    err.status = r.status;
+    throw err;
+  }
+  return body;
+}
+
+// ---- loops --------------------------------------------------------------------------------
+
+async function loadLoops() {
+  wb.loops = (await api('/api/loops')).loops;
+  const list = $('loop-list');
+  list.replaceChildren();
+  for (const l of wb.loops) {
+    const li = el('li', { 'data-id': l.id },
+      el('div', { class: 'name', textContent: l.name }),
+      el('div', { class: 'muted', textContent: l.samples + ' samples, ' + fmt(l.sample_period_s, 2) + ' s' }),
+      el('div', { class: 'muted loop-verdict', textContent: l.verdict ? 'verdict: ' + l.verdict : '' }));
+    li.onclick = () => selectLoop(l.id);
+    list.append(li);
+  }
+  if (wb.loops.length > 0) selectLoop(wb.loops[0].id);
+}
+
+async function selectLoop(id) {
+  wb.loop = wb.loops.find((l) => l.id === id);
+  wb.ladder = [];
+  wb.shown = null;
+  wb.window = null;
+  for (const li of $('loop-list').children) li.classList.toggle('selected', Number(li.dataset.id) === id);
+  $('empty').hidden = true;
+  $('view').hidden = false;
+  $('loop-name').textContent = wb.loop.name;
+  $('loop-info').textContent = wb.loop.source.split('/').pop() + ': ' + wb.loop.samples + ' samples every ' +
+    fmt(wb.loop.sample_period_s, 2) + ' s, t ' + fmt(wb.loop.start_s, 0) + ' to ' + fmt(wb.loop.end_s, 0) + ' s' +
+    (wb.loop.start_clock ? ' (from ' + wb.loop.start_clock + ')' : '');
+  $('report-link').href = '/api/loops/' + id + '/report';
+  showError('');
+  loadVerdict(id);
+  await drawTrends();
+  await loadLadder();
+  await loadDiagnosis();
+  // A loop opened for the first time: diagnose the linear model, so that there is a model to
+  // compare and findings to act on.
+  if (wb.ladder.length === 0 && !wb.job) runJob({ action: 'diagnose' }, 'diagnosing the linear model');
+}
+
+async function loadVerdict(id) {
+  $('verdict').textContent = 'computing…';
+  $('verdict').className = 'verdict';
+  $('stiction-size').textContent = '';
+  $('verdict-reason').textContent = '';
+  try {
+    const v = await api('/api/loops/' + id + '/verdict');
+    if (!wb.loop || wb.loop.id !== id) return;
+    $('verdict').textContent = v.verdict;
+    $('verdict').className = 'verdict ' + v.verdict;
+    if (v.stiction_percent !== null && v.stiction_percent !== undefined) {
+      $('stiction-size').textContent = 'stiction ' + fmt(v.stiction_percent, 2) + ' % of valve travel' +
+        (v.slip_jump_percent !== null ? ', slip jump ' + fmt(v.slip_jump_percent, 2) + ' %' : '') +
+        (v.stiction_lo_percent !== null ? ' (95 %: ' + fmt(v.stiction_lo_percent, 2) + ' to ' +
+          (v.stiction_hi_open ? 'open' : fmt(v.stiction_hi_percent, 2)) + ' %)' : '');
+    }
+    $('verdict-reason').textContent = (v.verdict_reason || '') + (v.verdict_model ? ' Model: ' + v.verdict_model + '.' : '');
+    const li = document.querySelector('#loop-list li[data-id="' + id + '"] .loop-verdict');
+    if (li) li.textContent = 'verdict: ' + v.verdict;
+  } catch (e) {
+    $('verdict').textContent = 'unavailable';
+    $('verdict-reason').textContent = e.message;
+  }
+}
+
+// ---- time charts: decimated on the server, fetched again for the window shown ----------------
+
+function bucketsFor(div) {
+  return Math.max(50, Math.min(2000, Math.round(div.clientWidth || 800)));
+}
+
+// min/max buckets -> dygraph custom bars [low, middle, high] per signal.
+function barRows(s, names) {
+  const rows = [];
+  for (let k = 0; k < s.t.length; ++k) {
+    const row = [(s.t[k] + s.t_end[k]) / 2];
+    for (const n of names) {
+      const lo = s[n].min[k], hi = s[n].max[k];
+      row.push(lo === null || hi === null ? null : [lo, (lo + hi) / 2, hi]);
+    }
+    rows.push(row);
+  }
+  return rows;
+}
+
+// Whole-record rows outside [from, to], the window's finer rows inside: the x range stays the
+// record's, so zooming out and panning keep working.
+function merge(coarse, fine, from, to) {
+  return coarse.filter((r) => r[0] < from).concat(fine, coarse.filter((r) => r[0] > to));
+}
+
+function splitTime() {
+  const step = wb.shown;
+  if (step && step.estimation_end_s !== null) return step.estimation_end_s;
+  return wb.loop.start_s + (1 - 0.3) * (wb.loop.end_s - wb.loop.start_s);  // diagnose's 30 %
+}
+
+function shadeSplit(canvas, area, g) {
+  const x0 = g.toDomXCoord(splitTime());
+  canvas.fillStyle = 'rgba(255, 214, 102, 0.22)';
+  canvas.fillRect(x0, area.y, area.x + area.w - x0, area.h);
+  canvas.fillStyle = '#9a7b1c';
+  canvas.font = '11px sans-serif';
+  // At the bottom: the legend holds the top right corner.
+  const y = area.y + area.h - 5;
+  canvas.fillText('validation', Math.min(x0 + 4, area.x + area.w - 60), y);
+  canvas.fillText('estimation', Math.max(area.x + 4, x0 - 66), y);
+}
+
+// Intervals where the shown model fails (fit --json's where.intervals), shaded red.
+function shadeFailures(canvas, area, g) {
+  shadeSplit(canvas, area, g);
+  for (const iv of (wb.failing || [])) {
+    const a = g.toDomXCoord(iv.t_begin_s), b = g.toDomXCoord(iv.t_end_s);
+    canvas.fillStyle = 'rgba(214, 69, 65, 0.15)';
+    canvas.fillRect(a, area.y, Math.max(2, b - a), area.h);
+  }
+}
+
+// The legend on a line of its own above the chart, where it hides no data.
+function legendFor(div) {
+  const l = el('div', { class: 'legend' });
+  div.before(l);
+  return l;
+}
+
+function makeChart(div, labels, colors, options = {}) {
+  return new Dygraph(div, [[0].concat(labels.slice(1).map(() => null))], Object.assign({
+    labels, colors, customBars: true, xlabel: '', legend: 'always', labelsDiv: legendFor(div),
+    strokeWidth: 1.2, fillAlpha: 0.35, axisLabelFontSize: 11, connectSeparatedPoints: false,
+    zoomCallback: (from, to) => zoomTo(from, to),
+  }, options));
+}
+
+function zoomTo(from, to) {
+  const whole = from <= wb.loop.start_s + 1e-9 && to >= wb.loop.end_s - 1e-9;
+  wb.window = whole ? null : [from, to];
+  clearTimeout(wb.zoomTimer);
+  wb.zoomTimer = setTimeout(() => { drawTrends(); drawModel(); }, 150);
+}
+
+function windowQuery(div) {
+  const q = 'buckets=' + bucketsFor(div);
+  return wb.window ? q + '&from=' + wb.window[0] + '&to=' + wb.window[1] : q;
+}
+
+async function drawTrends() {
+  const l = wb.loop, div = $('trend-chart');
+  const names = ['op', 'pv', 'sp'].filter((n) => l.signals.includes(n));
+  if (!wb.charts.trend) {
+    wb.charts.trend = makeChart(div, ['t (s)'].concat(names.map((n) => n.toUpperCase())),
+      ['#1f77b4', '#d62728', '#2ca02c'].slice(0, names.length), { underlayCallback: shadeSplit });
+  }
+  const id = l.id;
+  if (!wb.window || !wb.trendCoarse || wb.trendCoarse.id !== id) {
+    const whole = await api('/api/loops/' + id + '/series?buckets=' + bucketsFor(div));
+    wb.trendCoarse = { id, rows: barRows(whole, names) };
+  }
+  let rows = wb.trendCoarse.rows;
+  if (wb.window) {
+    const s = await api('/api/loops/' + id + '/series?' + windowQuery(div));
+    rows = merge(rows, barRows(s, names), wb.window[0], wb.window[1]);
+  }
+  if (wb.loop.id !== id) return;
+  wb.charts.trend.updateOptions({
+    file: rows, labels: ['t (s)'].concat(names.map((n) => n.toUpperCase())),
+    dateWindow: wb.window || [l.start_s, l.end_s],
+  });
+}
+
+async function drawModel() {
+  const l = wb.loop, step = wb.shown;
+  if (!wb.charts.fit) {
+    wb.charts.fit = makeChart($('fit-chart'), ['t (s)', 'PV measured', 'PV simulated'],
+      ['#d62728', '#222222'], { underlayCallback: shadeFailures });
+    wb.charts.residual = makeChart($('residual-chart'), ['t (s)', 'residual'], ['#7b4fa0'],
+      { underlayCallback: shadeSplit });
+  }
+  $('model-name').textContent = step ? 'step ' + step.step + ', ' + step.model : 'no model yet';
+  if (!step) {
+    for (const c of [wb.charts.fit, wb.charts.residual]) c.updateOptions({ file: [[0, null].concat(c === wb.charts.fit ? [null] : [])] });
+    return;
+  }
+  const base = '/api/loops/' + l.id + '/models/' + step.step;
+  const key = l.id + '/' + step.step;
+  if (!wb.simCoarse || wb.simCoarse.key !== key) {
+    const whole = await api(base + '/simulation?buckets=' + bucketsFor($('fit-chart')));
+    const model = await api(base);
+    wb.failing = model.where ? model.where.intervals : [];
+    wb.simCoarse = { key, fit: barRows(whole, ['pv', 'pv_sim']), res: barRows(whole, ['residual']) };
+  }
+  let fit = wb.simCoarse.fit, res = wb.simCoarse.res;
+  if (wb.window) {
+    try {
+      const s = await api(base + '/simulation?' + windowQuery($('fit-chart')));
+      fit = merge(fit, barRows(s, ['pv', 'pv_sim']), wb.window[0], wb.window[1]);
+      res = merge(res, barRows(s, ['residual']), wb.window[0], wb.window[1]);
+    } catch (e) {
+      // A window before the analysed part (a lead-in left out) holds no model output.
+    }
+  }
+  const dw = wb.window || [l.start_s, l.end_s];
+  wb.charts.fit.updateOptions({ file: fit, dateWindow: dw });
+  wb.charts.residual.updateOptions({ file: res, dateWindow: dw });
+  wb.charts.trend.updateOptions({});  // the split may have moved
+}
+
+// ---- the ladder -------------------------------------------------------------------------------
+
+async function loadLadder() {
+  const id = wb.loop.id;
+  const lad = await api('/api/loops/' + id + '/ladder');
+  if (wb.loop.id !== id) return;
+  wb.ladder = lad.steps;
+  if (wb.ladder.length > 0 && (!wb.shown || wb.shown.step >= wb.ladder.length || wb.followLast)) {
+    wb.shown = wb.ladder[wb.ladder.length - 1];
+  }
+  wb.followLast = true;
+  const body = $('ladder').tBodies[0];
+  body.replaceChildren();
+  for (const s of wb.ladder) {
+    const change = s.validation_fitness_change;
+    const tr = el('tr', { 'data-step': s.step, 'data-validation': s.validation_fitness_percent ?? '',
+      'data-estimation': s.fitness_percent ?? '', 'data-model': s.model },
+      el('td', { textContent: s.step }),
+      el('td', { class: 'model', textContent: s.model, title: s.action }),
+      el('td', { class: 'num', textContent: fmt(s.fitness_percent) + ' %' }),
+      el('td', { class: 'num', textContent: fmt(s.validation_fitness_percent) + ' %' }),
+      el('td', { class: 'num ' + (change > 0 ? 'up' : change < 0 ? 'down' : ''), textContent: signed(change) }),
+      el('td', {}, el('a', { href: '/api/loops/' + id + '/models/' + s.step, textContent: 'JSON' })));
+    if (wb.shown && s.step === wb.shown.step) tr.classList.add('current');
+    tr.onclick = (ev) => {
+      if (ev.target.tagName === 'A') return;
+      wb.shown = s;
+      wb.followLast = s.step === wb.ladder.length - 1;
+      loadLadder().then(drawModel);
+    };
+    body.append(tr);
+  }
+  drawLadderChart();
+  await drawModel();
+}
+
+function drawLadderChart() {
+  const rows = wb.ladder.map((s) => [s.step, s.fitness_percent, s.validation_fitness_percent]);
+  const opts = {
+    labels: ['step', 'estimation %', 'validation %'], colors: ['#1f77b4', '#ff7f0e'],
+    drawPoints: true, pointSize: 4, strokeWidth: 1.5, legend: 'always', axisLabelFontSize: 11,
+    labelsDiv: wb.ladderLegend || (wb.ladderLegend = legendFor($('ladder-chart'))),
+    xlabel: 'model step', ylabel: 'fitness %', includeZero: false,
+    axes: {
+      x: {
+        valueFormatter: (x) => 'step ' + x,
+        ticker: (lo, hi) => {  // one tick per step, whole numbers only
+          const t = [];
+          for (let k = Math.ceil(lo); k <= Math.floor(hi); ++k) t.push({ v: k, label: String(k) });
+          return t;
+        },
+      },
+      y: { pixelsPerLabel: 20 },
+    },
+  };
+  // The y range from the points (dygraphs pads a single point badly), at least 10 points high.
+  const ys = rows.flatMap((r) => r.slice(1)).filter((y) => y !== null && isFinite(y));
+  if (ys.length > 0) {
+    const lo = Math.min(...ys), hi = Math.max(...ys), pad = Math.max(5, (hi - lo) * 0.1);
+    opts.valueRange = [Math.floor(lo - pad), Math.min(100, Math.ceil(hi + pad))];
+  }
+  if (rows.length === 0) rows.push([0, null, null]);
+  if (rows.length === 1) opts.dateWindow = [-0.5, 0.5];
+  else opts.dateWindow = [-0.2, rows.length - 0.8];
+  if (!wb.charts.ladder) wb.charts.ladder = new Dygraph($('ladder-chart'), rows, opts);
+  else wb.charts.ladder.updateOptions(Object.assign({ file: rows }, opts));
+}
+
+// ---- findings ---------------------------------------------------------------------------------
+
+async function loadDiagnosis() {
+  const id = wb.loop.id;
+  let d = null;
+  try {
+    d = await api('/api/loops/' + id + '/diagnosis');
+  } catch (e) {
+    if (e.status !== 404) throw e;
+  }
+  if (wb.loop.id !== id) return;
+  showFindings(d);
+}
+
+function showFindings(d) {
+  const body = $('findings').tBodies[0];
+  body.replaceChildren();
+  $('findings-model').textContent = d ? '(missing from ' + d.model + ')' : '';
+  $('conclusion').textContent = d ? d.conclusion : 'No diagnosis yet.';
+  if (!d) return;
+  for (const f of d.findings) {
+    const add = el('button', { type: 'button', textContent: 'Add', className: 'add' });
+    add.disabled = !!wb.job;
+    add.onclick = () => runJob({ action: 'add', effect: f.effect }, 'adding ' + f.effect, true);
+    const tr = el('tr', { 'data-effect': f.effect, class: f.supported ? 'supported' : '' },
+      el('td', { textContent: f.effect }),
+      el('td', { class: 'num', textContent: fmt(f.score, 2) }),
+      el('td', { class: 'num', textContent: signed(f.validation_gain_percent) }),
+      el('td', { textContent: f.explanation }),
+      el('td', {}, add));
+    body.append(tr);
+  }
+}
+
+// ---- jobs -------------------------------------------------------------------------------------
+
+function setBusy(busy) {
+  document.body.dataset.job = busy ? 'running' : 'idle';
+  $('diagnose-btn').disabled = busy;
+  for (const b of document.querySelectorAll('button.add')) b.disabled = busy;
+}
+
+// Starts a job on the loop shown and follows it; `rediagnose`: diagnose the new model after it.
+async function runJob(body, text, rediagnose = false) {
+  const id = wb.loop.id;
+  showError('');
+  setBusy(true);
+  let job;
+  try {
+    job = await api('/api/loops/' + id + '/jobs', {
+      method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(body),
+    });
+  } catch (e) {
+    setBusy(false);
+    showError('Could not start the job: ' + e.message);
+    return;
+  }
+  wb.job = job.job;
+  $('job').hidden = false;
+  $('job-cancel').disabled = false;
+  let st = job;
+  while (st.state === 'queued' || st.state === 'running') {
+    $('job-text').textContent = text + ': ' + st.state + (st.phase ? ', ' + st.phase : '') +
+      ' (' + fmt(st.elapsed_s, 0) + ' s)';
+    $('job-progress').value = st.progress || 0;
+    await new Promise((r) => setTimeout(r, 400));
+    try {
+      st = await api('/api/jobs/' + wb.job);
+    } catch (e) {
+      st = { state: 'failed', error: e.message };
+    }
+  }
+  wb.job = null;
+  wb.history.push(text + ': ' + st.state);
+  $('job').hidden = true;
+  setBusy(false);
+  if (st.state === 'failed') showError(text + ' failed: ' + st.error);
+  if (st.state === 'cancelled') showError(text + ': cancelled');
+  if (wb.loop.id !== id) return;
+  if (st.state === 'done') {
+    wb.followLast = true;
+    await loadLadder();
+    await loadDiagnosis();
+    if (rediagnose) runJob({ action: 'diagnose' }, 'diagnosing ' + wb.shown.model);
+  }
+}
+
+$('job-cancel').onclick = () => {
+  if (!wb.job) return;
+  $('job-cancel').disabled = true;
+  api('/api/jobs/' + wb.job, { method: 'DELETE' }).catch((e) => showError(e.message));
+};
+$('diagnose-btn').onclick = () => runJob({ action: 'diagnose' }, 'diagnosing ' + (wb.shown ? wb.shown.model : 'linear'));
+
+// The token came in the address (?token=): the cookie carries it now, the address bar need not.
+if (location.search.includes('token=')) history.replaceState(null, '', location.pathname);
+document.body.dataset.job = 'idle';
+loadLoops().catch((e) => showError('Could not read the loops: ' + e.message));

@@ -1,0 +1,288 @@
+// The workbench in a real browser: `valvediag serve` on a simulated loop with stiction hidden in
+// it, headless Chromium driven by Debian's chromium-driver over WebDriver (W3C, JSON over HTTP,
+// sent with cpp-httplib's client). The page diagnoses the linear model by itself; the top finding
+// must name stiction; clicking its "Add" must grow the ladder by a stiction step whose validation
+// error is far below the linear model's; the screenshot, decoded with libpng, must show a page.
+#include <doctest/doctest.h>
+#include <netinet/in.h>
+#include <png.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+// Last: it includes <httplib.h> (its `_res` macro breaks Eigen headers included after it).
+#include "serve_process.hpp"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+const fs::path kTmp = VALVEDIAG_TMP;
+// The element key of W3C WebDriver's answers.
+const char* kElement = "element-6066-11e4-a52e-4f735466cecf";
+
+std::string on_path(const std::string& name) {
+  const char* path = std::getenv("PATH");
+  std::string dirs = path ? path : "";
+  for (std::size_t b = 0; b <= dirs.size();) {
+    std::size_t e = dirs.find(':', b);
+    if (e == std::string::npos) e = dirs.size();
+    const fs::path p = fs::path(dirs.substr(b, e - b)) / name;
+    if (::access(p.c_str(), X_OK) == 0) return p.string();
+    b = e + 1;
+  }
+  return "";
+}
+
+// A port no one listens on now (the kernel's pick), for chromedriver.
+int free_port() {
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  REQUIRE(s >= 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  REQUIRE(::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  socklen_t n = sizeof a;
+  REQUIRE(::getsockname(s, reinterpret_cast<sockaddr*>(&a), &n) == 0);
+  ::close(s);
+  return ntohs(a.sin_port);
+}
+
+std::string base64_decode(const std::string& in) {
+  std::string out;
+  int bits = 0, value = 0;
+  for (char c : in) {
+    int d;
+    if (c >= 'A' && c <= 'Z')
+      d = c - 'A';
+    else if (c >= 'a' && c <= 'z')
+      d = c - 'a' + 26;
+    else if (c >= '0' && c <= '9')
+      d = c - '0' + 52;
+    else if (c == '+')
+      d = 62;
+    else if (c == '/')
+      d = 63;
+    else
+      continue;  // '=' padding, line breaks
+    value = value << 6 | d;
+    bits += 6;
+    if (bits >= 8) {
+      bits -= 8;
+      out += static_cast<char>((value >> bits) & 0xff);
+    }
+  }
+  return out;
+}
+
+// chromedriver in a process group of its own (it starts the browser), with a fresh HOME and
+// profile: killed with everything it started when the object goes.
+struct Driver {
+  pid_t pid = -1;
+  int port = 0;
+  fs::path home;
+  std::string session;
+  std::unique_ptr<httplib::Client> http;
+
+  Driver(const std::string& chromedriver, const std::string& chromium) {
+    home = kTmp / ("webdriver_home_" + std::to_string(::getpid()));
+    fs::remove_all(home);
+    fs::create_directories(home);
+    port = free_port();
+    const std::vector<std::string> env{"HOME=" + home.string(),
+                                       "XDG_CONFIG_HOME=" + (home / "config").string(),
+                                       "XDG_CACHE_HOME=" + (home / "cache").string(),
+                                       "TMPDIR=" + home.string(),
+                                       "-DISPLAY",
+                                       "-WAYLAND_DISPLAY"};
+    pid = valvediag::test::spawn({chromedriver, "--port=" + std::to_string(port)},
+                                 home / "chromedriver.log", env, "", true);
+    REQUIRE(pid > 0);
+    http = std::make_unique<httplib::Client>("127.0.0.1", port);
+    http->set_connection_timeout(2, 0);
+    http->set_read_timeout(60, 0);
+    const auto end = Clock::now() + std::chrono::seconds(30);
+    for (;;) {
+      const auto r = http->Get("/status");
+      if (r && r->status == 200 && json::parse(r->body)["value"]["ready"] == true) break;
+      REQUIRE_MESSAGE(Clock::now() < end, "chromedriver did not start: "
+                                              << valvediag::test::slurp(home / "chromedriver.log"));
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    const json caps{{"capabilities",
+                     {{"alwaysMatch",
+                       {{"browserName", "chrome"},
+                        {"goog:chromeOptions",
+                         {{"binary", chromium},
+                          {"args",
+                           {"--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                            "--force-device-scale-factor=1", "--window-size=1400,1900",
+                            "--user-data-dir=" + (home / "profile").string(), "--no-first-run",
+                            "--no-default-browser-check", "--disable-background-networking",
+                            "--disable-component-update", "--disable-sync", "--disable-extensions",
+                            "--disable-default-apps", "--no-pings", "--disable-breakpad",
+                            "--dns-prefetch-disable",
+                            // No way out: every host name fails; the page is at an IP address.
+                            "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1"}}}}}}}}};
+    const json s = call("POST", "/session", caps);
+    session = s["sessionId"];
+  }
+  ~Driver() {
+    if (!session.empty() && http) (void)http->Delete("/session/" + session);
+    if (pid > 0) {
+      ::kill(-pid, SIGKILL);  // chromedriver and the browser it started
+      ::waitpid(pid, nullptr, 0);
+    }
+    std::error_code ec;
+    fs::remove_all(home, ec);
+  }
+  // One WebDriver command; its "value".
+  json call(const std::string& method, const std::string& path, const json& body = json::object()) {
+    httplib::Result r = method == "GET"    ? http->Get(path)
+                        : method == "POST" ? http->Post(path, body.dump(), "application/json")
+                                           : http->Delete(path);
+    REQUIRE_MESSAGE(r, "WebDriver " << method << " " << path << ": no answer");
+    const json j = json::parse(r->body);
+    REQUIRE_MESSAGE(r->status == 200, "WebDriver " << method << " " << path << ": " << r->body);
+    return path == "/session" ? j["value"] : j["value"];
+  }
+  json session_call(const std::string& method, const std::string& path,
+                    const json& body = json::object()) {
+    return call(method, "/session/" + session + path, body);
+  }
+  json script(const std::string& js) {
+    return session_call("POST", "/execute/sync", {{"script", js}, {"args", json::array()}});
+  }
+  // Waits until `js` returns something other than null or false; its value.
+  json wait_for(const std::string& js, double limit_s, const std::string& what) {
+    const auto end = Clock::now() + std::chrono::duration<double>(limit_s);
+    for (;;) {
+      json v = script(js);
+      if (!v.is_null() && v != false) return v;
+      REQUIRE_MESSAGE(Clock::now() < end, "the page did not show "
+                                              << what << " within " << limit_s << " s; its error: "
+                                              << script("return document.getElementById('error')"
+                                                        ".textContent"));
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
+};
+
+struct Picture {
+  int width = 0, height = 0;
+  double content_share = 0.0;  // pixels not of the background colour
+  long colour_pixels = 0;      // saturated colour: the charts' lines
+  std::size_t colours = 0;
+};
+
+Picture look_at(const std::string& png) {
+  png_image image{};
+  image.version = PNG_IMAGE_VERSION;
+  REQUIRE_MESSAGE(png_image_begin_read_from_memory(&image, png.data(), png.size()) != 0,
+                  image.message);
+  image.format = PNG_FORMAT_RGB;
+  std::vector<std::uint8_t> rgb(PNG_IMAGE_SIZE(image));
+  REQUIRE(png_image_finish_read(&image, nullptr, rgb.data(), 0, nullptr) != 0);
+  Picture p;
+  p.width = static_cast<int>(image.width);
+  p.height = static_cast<int>(image.height);
+  std::map<std::uint32_t, long> hist;
+  for (std::size_t i = 0; i + 2 < rgb.size(); i += 3) {
+    const int r = rgb[i], g = rgb[i + 1], b = rgb[i + 2];
+    ++hist[std::uint32_t(r) << 16 | std::uint32_t(g) << 8 | std::uint32_t(b)];
+    p.colour_pixels += std::max({r, g, b}) - std::min({r, g, b}) >= 60;
+  }
+  long most = 0;
+  for (const auto& [c, n] : hist) most = std::max(most, n);
+  p.colours = hist.size();
+  p.content_share = 1.0 - static_cast<double>(most) / (static_cast<double>(rgb.size()) / 3.0);
+  return p;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "the workbench in Chromium: the top finding is the hidden stiction, Add lowers the "
+    "validation error") {
+  const std::string chromedriver = on_path("chromedriver"), chromium = on_path("chromium");
+  if (chromedriver.empty() || chromium.empty())
+    FAIL(
+        "headless Chromium and its WebDriver (Debian packages chromium and chromium-driver) are "
+        "not on PATH: run VALVEDIAG_TEST_DEPS=1 scripts/install-deps.sh");
+  // The paper's Example 1 loop: He stiction hidden, the page starts from the linear model.
+  const fs::path csv = kTmp / "workbench_browser_ex1.csv";
+  const auto sim = valvediag::test::run_cli(VALVEDIAG_BIN,
+                                            {"simulate", "--scenario", "paper-ex1", "--seed", "1",
+                                             "--samples", "1500", "--out", csv.string()},
+                                            kTmp, 60.0);
+  REQUIRE_MESSAGE(sim.status == 0, sim.out);
+  valvediag::test::ServeProcess server(VALVEDIAG_BIN, {csv.string(), "--port", "0", "--token"},
+                                       kTmp, "browser");
+  REQUIRE(server.port > 0);
+  Driver d(chromedriver, chromium);
+  d.session_call(
+      "POST", "/url",
+      {{"url", "http://127.0.0.1:" + std::to_string(server.port) + "/?token=" + server.token}});
+
+  // The page diagnoses the linear model by itself: the findings, ranked.
+  const std::string idle = "document.body.dataset.job === 'idle'";
+  const json top = d.wait_for(
+      "const r = document.querySelector('#findings tbody tr');"
+      "return " +
+          idle + " && r ? r.dataset.effect : null;",
+      120.0, "the findings");
+  CHECK(top == "stiction");
+  const json ladder0 = d.script("return document.querySelectorAll('#ladder tbody tr').length;");
+  CHECK(ladder0 == 1);
+
+  // Add the top finding: the ladder grows by its step.
+  const json button = d.session_call(
+      "POST", "/element",
+      {{"using", "css selector"}, {"value", "#findings tbody tr:first-child button.add"}});
+  d.session_call("POST", "/element/" + button[kElement].get<std::string>() + "/click");
+  const json rows = d.wait_for(
+      "const rows = [...document.querySelectorAll('#ladder tbody tr')];"
+      "return rows.length >= 2 ? rows.map((r) => [r.dataset.model, Number(r.dataset.validation)])"
+      " : null;",
+      120.0, "a second ladder step");
+  REQUIRE(rows.size() == 2);
+  CHECK(rows[0][0] == "linear");
+  CHECK(rows[1][0] == "stiction");
+  // Fitness is 100 % minus the normalized error: the validation error fell by tens of points.
+  const double before = 100.0 - rows[0][1].get<double>(), after = 100.0 - rows[1][1].get<double>();
+  MESSAGE("validation error " << before << " % -> " << after << " %");
+  CHECK(after < before - 20.0);
+  CHECK(after < 10.0);
+
+  // The page then diagnoses the new model; once it has, the picture.
+  d.wait_for("return " + idle +
+                 " && document.getElementById('findings-model').textContent.includes('stiction');",
+             120.0, "the findings of the stiction model");
+  CHECK(d.script("return document.getElementById('model-name').textContent;")
+            .get<std::string>()
+            .find("stiction") != std::string::npos);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the charts' last redraw
+  MESSAGE("jobs: " << d.script("return wb.history;").dump());
+  const std::string png = base64_decode(d.session_call("GET", "/screenshot").get<std::string>());
+  const fs::path shot = kTmp / "workbench.png";
+  std::ofstream(shot, std::ios::binary) << png;
+  const Picture p = look_at(png);
+  MESSAGE(shot.string() << ": " << p.width << "x" << p.height << ", content " << p.content_share
+                        << ", " << p.colours << " colours, " << p.colour_pixels
+                        << " colour pixels");
+  CHECK(p.width >= 1000);
+  CHECK(p.content_share > 0.2);    // not a blank page
+  CHECK(p.colours > 200);          // text, charts, shading
+  CHECK(p.colour_pixels > 20000);  // the charts' lines and shaded parts
+  CHECK(server.stop() == 0);
+}
