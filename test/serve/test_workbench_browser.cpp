@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -284,5 +285,23 @@ TEST_CASE(
   CHECK(p.content_share > 0.2);    // not a blank page
   CHECK(p.colours > 200);          // text, charts, shading
   CHECK(p.colour_pixels > 20000);  // the charts' lines and shaded parts
+
+  // Zoom to 100 s of the record: the page asks the server again for that window, so every one of
+  // its 201 samples is drawn (the whole record's buckets hold about one and a quarter each).
+  d.script("zoomTo(200, 300); return true;");
+  const json inside = d.wait_for(
+      "const g = wb.charts.trend; let n = 0;"
+      "for (let i = 0; i < g.numRows(); ++i) { const x = g.getValue(i, 0);"
+      "  if (x >= 200 && x <= 300) ++n; }"
+      "return n >= 201 ? n : null;",
+      60.0, "the zoomed window's samples");
+  CHECK(inside == 201);
+  const json dw = d.script("return wb.charts.trend.xAxisRange();");
+  CHECK(dw[0] == 200);
+  CHECK(dw[1] == 300);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const std::string zoomed = base64_decode(d.session_call("GET", "/screenshot").get<std::string>());
+  std::ofstream(kTmp / "workbench_zoomed.png", std::ios::binary) << zoomed;
+  CHECK(look_at(zoomed).content_share > 0.2);
   CHECK(server.stop() == 0);
 }

@@ -152,15 +152,16 @@ function splitTime() {
 }
 
 function shadeSplit(canvas, area, g) {
-  const x0 = g.toDomXCoord(splitTime());
+  const x0 = g.toDomXCoord(splitTime()), left = area.x, right = area.x + area.w;
+  if (x0 >= right) return;  // the window shows estimation data only
   canvas.fillStyle = 'rgba(255, 214, 102, 0.22)';
-  canvas.fillRect(x0, area.y, area.x + area.w - x0, area.h);
+  canvas.fillRect(Math.max(x0, left), area.y, right - Math.max(x0, left), area.h);
+  if (x0 <= left) return;
   canvas.fillStyle = '#9a7b1c';
   canvas.font = '11px sans-serif';
-  // At the bottom: the legend holds the top right corner.
-  const y = area.y + area.h - 5;
-  canvas.fillText('validation', Math.min(x0 + 4, area.x + area.w - 60), y);
-  canvas.fillText('estimation', Math.max(area.x + 4, x0 - 66), y);
+  const y = area.y + area.h - 5;  // at the bottom: the legend is above the chart
+  canvas.fillText('validation', Math.min(x0 + 4, right - 60), y);
+  canvas.fillText('estimation', Math.max(left + 4, x0 - 66), y);
 }
 
 // Intervals where the shown model fails (fit --json's where.intervals), shaded red.
