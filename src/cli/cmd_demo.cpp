@@ -23,6 +23,7 @@
 #include "valvediag/sim/scenarios.hpp"
 #include "valvediag/sweep/loop_verdict.hpp"
 #include "verdict_output.hpp"
+#include "workbench_server.hpp"
 
 namespace valvediag::cli {
 
@@ -144,7 +145,8 @@ void add_demo(CLI::App& app, int& exit_code) {
       "fitted, compared with the paper, diagnosed and written up as an HTML report");
   cmd->footer(
       "Examples:\n  valvediag demo\n  valvediag demo --out-dir /tmp/vd --speed 200\n"
-      "  valvediag demo --offline      (no bus: simulate and fit directly)");
+      "  valvediag demo --offline      (no bus: simulate and fit directly)\n"
+      "  valvediag demo --serve        (then the workbench on the recording, in a browser)");
   struct Args {
     std::uint64_t seed = 1;
     std::string json;
@@ -152,6 +154,8 @@ void add_demo(CLI::App& app, int& exit_code) {
     double speed = 100.0;
     std::size_t samples = 3000;
     bool offline = false;
+    bool serve = false;
+    int port = 8080;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("--seed", a->seed, "random seed of the simulation")->capture_default_str();
@@ -166,6 +170,11 @@ void add_demo(CLI::App& app, int& exit_code) {
       ->check(CLI::Range(600, 20000))
       ->capture_default_str();
   cmd->add_flag("--offline", a->offline, "simulate and fit without the bus (the quick check)");
+  cmd->add_flag("--serve", a->serve,
+                "then open the workbench on the recording (http://127.0.0.1:PORT/, until Ctrl-C)");
+  cmd->add_option("--port", a->port, "--serve: the workbench's port; 0 picks a free one")
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
   cmd->callback([a, &exit_code] {
     namespace fs = std::filesystem;
     const Scenario s = scenario_by_name("paper-ex1");
@@ -252,6 +261,17 @@ void add_demo(CLI::App& app, int& exit_code) {
     std::cout << "  model history   " << history << "   (valvediag ladder " << csv << " --history "
               << history << ")\n"
               << "  report (HTML)   " << report << "\n";
+    if (a->serve) {
+      // The recording in the workbench: the same loop, its models built by hand from linear.
+      WorkbenchSettings w;
+      w.port = a->port;
+      std::vector<std::string> notes;
+      std::vector<serve::ServedLoop> loops;
+      loops.push_back(served_loop("FIC101", d, w, notes));
+      for (const auto& n : notes) std::cout << "note: " << n << "\n";
+      std::cout << "\n" << (a->offline ? "" : "6. ") << "the workbench on FIC101:\n";
+      run_workbench(std::move(loops), w);
+    }
     exit_code = kOk;
   });
 }

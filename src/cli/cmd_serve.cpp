@@ -17,11 +17,146 @@
 #include "valvediag/serve/workbench_api.hpp"
 #include "valvediag/sweep/loop_verdict.hpp"
 #include "verdict_output.hpp"
+#include "workbench_server.hpp"
 
 // Last: it brings <resolv.h>, whose `_res` macro breaks the Eigen headers included after it.
 #include <httplib.h>
 
 namespace valvediag::cli {
+
+void check_workbench_bind(const WorkbenchSettings& w) {
+  // A server others can reach without a token would hand the plant's data to anyone on the
+  // network.
+  if (!serve::is_loopback(w.bind) && !w.token)
+    throw UsageError("--bind " + w.bind +
+                     " lets other machines connect: add --token, so that every request must "
+                     "carry the random token printed at start");
+}
+
+serve::ServedLoop served_loop(std::string name, LoopData d, const WorkbenchSettings& w,
+                              std::vector<std::string>& notes) {
+  // The models are fitted to the part diagnose analyses (a quiet lead-in left out).
+  std::optional<LoopData> part;
+  if (d.size() >= 200) {
+    AnalysedPart p = analysed_part(d, w.keep_lead_in, w.range, notes);
+    if (p.from_s > 0) part = std::move(p.data);
+  }
+  return {std::move(name), std::move(d), std::move(part)};
+}
+
+void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings& w) {
+  check_workbench_bind(w);
+  // The very call diagnose makes for its verdict, with the same options and JSON keys.
+  const OpRange range = w.range;
+  const double validate = w.validate, min_gain = w.min_gain;
+  const bool keep = w.keep_lead_in;
+  serve::VerdictFunction verdict = [=](const LoopData& d) {
+    const LoopVerdict lv = loop_verdict(
+        d, verdict_options(range, validate, keep, d.t.empty() ? 0.0 : d.t.front(), min_gain));
+    nlohmann::json j;
+    add_verdict_json(j, lv);
+    j["verdict_basis"] = verdict_basis(lv);
+    j["analysed_from_s"] = lv.analysed_from_s;
+    return j;
+  };
+  const std::string token = w.token ? serve::random_token() : "";
+  serve::ModelOptions mo;
+  mo.validate = validate;
+  mo.min_gain = min_gain;
+  mo.range = range;
+  serve::JobLimits limits;
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  limits.workers = w.jobs == 0 ? cores : std::min(w.jobs, cores);
+  // The cores shared out: jobs times threads per fit stay within them.
+  mo.threads = static_cast<int>(std::max(1u, cores / limits.workers));
+  const serve::WorkbenchApi api(std::move(loops), verdict, token, mo, limits);
+
+  httplib::Server srv;
+  auto handler = [&api](const httplib::Request& req, httplib::Response& res) {
+    serve::ApiRequest r;
+    r.method = req.method;
+    r.path = req.path;  // URL-decoded by httplib: "%2e%2e" arrives as ".."
+    for (const auto& [k, v] : req.params) r.query.emplace(k, v);
+    r.authorization = req.get_header_value("Authorization");
+    r.cookie = req.get_header_value("Cookie");
+    r.host = req.get_header_value("Host");
+    r.content_type = req.get_header_value("Content-Type");
+    r.body = req.body;
+    const serve::ApiResponse out = api.handle(r);
+    res.status = out.status;
+    if (!out.attachment.empty())
+      res.set_header("Content-Disposition", "attachment; filename=\"" + out.attachment + "\"");
+    if (!out.set_cookie.empty()) res.set_header("Set-Cookie", out.set_cookie);
+    res.set_content(serve::response_text(out), serve::response_type(out));
+  };
+  // Every path and method goes to the API, which refuses what it does not serve ([\s\S]: a
+  // decoded %0a in a path must not fall through to httplib's empty 404).
+  const char* any = R"([\s\S]*)";
+  srv.Get(any, handler);
+  srv.Post(any, handler);
+  srv.Put(any, handler);
+  srv.Patch(any, handler);
+  srv.Delete(any, handler);
+  srv.Options(any, handler);
+  // What httplib refuses itself (a malformed request line, a too long URI) gets a JSON error
+  // too; the API's own errors already have their body.
+  srv.set_error_handler([](const httplib::Request&, httplib::Response& res) {
+    if (res.body.empty())
+      res.set_content(
+          serve::response_text(
+              {res.status, {{"error", "bad request (HTTP " + std::to_string(res.status) + ")"}}}),
+          "application/json");
+  });
+  srv.set_exception_handler(
+      [](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
+        res.status = 500;
+        res.set_content(R"({"error":"internal error"})", "application/json");
+      });
+  srv.set_default_headers({{"Cache-Control", "no-store"}, {"X-Content-Type-Options", "nosniff"}});
+  // httplib's default sets SO_REUSEPORT, with which a second server binds a port already in
+  // use and takes some of its connections: SO_REUSEADDR alone refuses a port in use.
+  srv.set_socket_options([](int sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+  });
+  srv.set_payload_max_length(serve::kMaxBody + 1);  // larger bodies: 413 before they are read
+  srv.set_read_timeout(5, 0);
+  srv.set_write_timeout(5, 0);
+
+  int port = w.port;
+  if (port == 0)
+    port = srv.bind_to_any_port(w.bind);
+  else if (!srv.bind_to_port(w.bind, port))
+    port = -1;
+  if (port <= 0)
+    throw std::runtime_error("cannot listen on " + w.bind + " port " + std::to_string(w.port) +
+                             ": the port is in use or the address is not this machine's");
+  std::atomic<bool>& stop = install_stop_signals();
+  std::atomic<bool> ended{false};
+  std::thread server([&] {
+    srv.listen_after_bind();
+    ended = true;
+  });
+  // stop() only closes a socket listen_after_bind() has started on: a Ctrl-C before that would
+  // leave the join below waiting for ever.
+  while (!srv.is_running() && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  const std::string host = w.bind.find(':') != std::string::npos ? "[" + w.bind + "]" : w.bind;
+  const std::string page = "http://" + host + ":" + std::to_string(port) + "/";
+  std::cout << "serving " << api.size() << " loop(s) on " << page
+            << "api/loops; the workbench: " << page << (token.empty() ? "" : "?token=" + token)
+            << " (Ctrl-C stops)\n";
+  if (!token.empty())
+    std::cout << "token: " << token << "  (send 'Authorization: Bearer " << token << "')\n";
+  std::cout << std::flush;
+  while (!stop && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  // Finishes the requests in progress (a verdict being computed included), then returns.
+  srv.stop();
+  server.join();
+  if (!stop)  // the listening loop ended without being asked to: not a clean stop
+    throw std::runtime_error("the server stopped listening on " + w.bind + " port " +
+                             std::to_string(port) + " unexpectedly");
+  std::cout << "stopped" << std::endl;
+}
 
 void add_serve(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
@@ -44,40 +179,33 @@ void add_serve(CLI::App& app, int& exit_code) {
   struct Args {
     std::vector<std::string> files;
     DataOptions layout;
-    int port = 8080;
-    std::string bind = "127.0.0.1";
-    bool token = false, keep_lead_in = false;
-    unsigned jobs = 0;
-    double validate = 0.3, min_gain = 2.0;
+    WorkbenchSettings w;
     std::string op_range;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("files", a->files, "data files (CSV or .mat), one loop each")->required();
   add_layout_options(cmd, a->layout);
   add_op_range_option(cmd, a->op_range);
-  cmd->add_option("--port", a->port, "TCP port; 0 picks a free one (printed)")
+  cmd->add_option("--port", a->w.port, "TCP port; 0 picks a free one (printed)")
       ->check(CLI::Range(0, 65535))
       ->capture_default_str();
-  cmd->add_option("--bind", a->bind, "address to listen on; other than loopback needs --token")
+  cmd->add_option("--bind", a->w.bind, "address to listen on; other than loopback needs --token")
       ->capture_default_str();
-  cmd->add_flag("--token", a->token, "require a random token (printed at start) on every request");
-  cmd->add_option("--jobs", a->jobs, "model jobs run at once (0: one per core; at most the cores)")
+  cmd->add_flag("--token", a->w.token,
+                "require a random token (printed at start) on every request");
+  cmd->add_option("--jobs", a->w.jobs,
+                  "model jobs run at once (0: one per core; at most the cores)")
       ->capture_default_str();
-  cmd->add_option("--validate", a->validate, "verdict: fraction of the record held out")
+  cmd->add_option("--validate", a->w.validate, "verdict: fraction of the record held out")
       ->capture_default_str();
-  cmd->add_option("--min-gain", a->min_gain, "verdict: smallest fitness gain worth an effect")
+  cmd->add_option("--min-gain", a->w.min_gain, "verdict: smallest fitness gain worth an effect")
       ->capture_default_str();
-  cmd->add_flag("--keep-lead-in", a->keep_lead_in,
+  cmd->add_flag("--keep-lead-in", a->w.keep_lead_in,
                 "verdict: analyse the whole record, quiet lead-in included");
   cmd->callback([a, &exit_code] {
-    // Checked before any data is read: a server others can reach without a token would hand
-    // the plant's data to anyone on the network.
-    if (!serve::is_loopback(a->bind) && !a->token)
-      throw UsageError("--bind " + a->bind +
-                       " lets other machines connect: add --token, so that every request must "
-                       "carry the random token printed at start");
-    (void)split_check_shares(a->validate, false);  // the range check diagnose makes
-    const OpRange range = parse_op_range(a->op_range);
+    check_workbench_bind(a->w);                      // before any data is read
+    (void)split_check_shares(a->w.validate, false);  // the range check diagnose makes
+    a->w.range = parse_op_range(a->op_range);
     std::vector<serve::ServedLoop> loops;
     for (const auto& f : a->files) {
       DataOptions in = a->layout;
@@ -85,124 +213,10 @@ void add_serve(CLI::App& app, int& exit_code) {
       std::vector<std::string> notes;
       LoopData d = load_data(in, notes);
       std::string name = d.tag.empty() ? std::filesystem::path(f).stem().string() : d.tag;
-      // The models are fitted to the part diagnose analyses (a quiet lead-in left out).
-      std::optional<LoopData> part;
-      if (d.size() >= 200) {
-        AnalysedPart p = analysed_part(d, a->keep_lead_in, range, notes);
-        if (p.from_s > 0) part = std::move(p.data);
-      }
+      loops.push_back(served_loop(std::move(name), std::move(d), a->w, notes));
       for (const auto& n : notes) std::cout << "note: " << f << ": " << n << "\n";
-      loops.push_back({std::move(name), std::move(d), std::move(part)});
     }
-    // The very call diagnose makes for its verdict, with the same options and JSON keys.
-    const double validate = a->validate, min_gain = a->min_gain;
-    const bool keep = a->keep_lead_in;
-    serve::VerdictFunction verdict = [=](const LoopData& d) {
-      const LoopVerdict lv = loop_verdict(
-          d, verdict_options(range, validate, keep, d.t.empty() ? 0.0 : d.t.front(), min_gain));
-      nlohmann::json j;
-      add_verdict_json(j, lv);
-      j["verdict_basis"] = verdict_basis(lv);
-      j["analysed_from_s"] = lv.analysed_from_s;
-      return j;
-    };
-    const std::string token = a->token ? serve::random_token() : "";
-    serve::ModelOptions mo;
-    mo.validate = validate;
-    mo.min_gain = min_gain;
-    mo.range = range;
-    serve::JobLimits limits;
-    limits.workers = std::max(1u, std::min(a->jobs, std::thread::hardware_concurrency()));
-    // The cores shared out: jobs times threads per fit stay within them.
-    mo.threads = static_cast<int>(
-        std::max(1u, std::max(1u, std::thread::hardware_concurrency()) / limits.workers));
-    const serve::WorkbenchApi api(std::move(loops), verdict, token, mo, limits);
-
-    httplib::Server srv;
-    auto handler = [&api](const httplib::Request& req, httplib::Response& res) {
-      serve::ApiRequest r;
-      r.method = req.method;
-      r.path = req.path;  // URL-decoded by httplib: "%2e%2e" arrives as ".."
-      for (const auto& [k, v] : req.params) r.query.emplace(k, v);
-      r.authorization = req.get_header_value("Authorization");
-      r.cookie = req.get_header_value("Cookie");
-      r.host = req.get_header_value("Host");
-      r.content_type = req.get_header_value("Content-Type");
-      r.body = req.body;
-      const serve::ApiResponse out = api.handle(r);
-      res.status = out.status;
-      if (!out.attachment.empty())
-        res.set_header("Content-Disposition", "attachment; filename=\"" + out.attachment + "\"");
-      if (!out.set_cookie.empty()) res.set_header("Set-Cookie", out.set_cookie);
-      res.set_content(serve::response_text(out), serve::response_type(out));
-    };
-    // Every path and method goes to the API, which refuses what it does not serve ([\s\S]: a
-    // decoded %0a in a path must not fall through to httplib's empty 404).
-    const char* any = R"([\s\S]*)";
-    srv.Get(any, handler);
-    srv.Post(any, handler);
-    srv.Put(any, handler);
-    srv.Patch(any, handler);
-    srv.Delete(any, handler);
-    srv.Options(any, handler);
-    // What httplib refuses itself (a malformed request line, a too long URI) gets a JSON error
-    // too; the API's own errors already have their body.
-    srv.set_error_handler([](const httplib::Request&, httplib::Response& res) {
-      if (res.body.empty())
-        res.set_content(
-            serve::response_text(
-                {res.status, {{"error", "bad request (HTTP " + std::to_string(res.status) + ")"}}}),
-            "application/json");
-    });
-    srv.set_exception_handler(
-        [](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
-          res.status = 500;
-          res.set_content(R"({"error":"internal error"})", "application/json");
-        });
-    srv.set_default_headers({{"Cache-Control", "no-store"}, {"X-Content-Type-Options", "nosniff"}});
-    // httplib's default sets SO_REUSEPORT, with which a second server binds a port already in
-    // use and takes some of its connections: SO_REUSEADDR alone refuses a port in use.
-    srv.set_socket_options([](int sock) {
-      int yes = 1;
-      setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
-    });
-    srv.set_payload_max_length(serve::kMaxBody + 1);  // larger bodies: 413 before they are read
-    srv.set_read_timeout(5, 0);
-    srv.set_write_timeout(5, 0);
-
-    int port = a->port;
-    if (port == 0)
-      port = srv.bind_to_any_port(a->bind);
-    else if (!srv.bind_to_port(a->bind, port))
-      port = -1;
-    if (port <= 0)
-      throw std::runtime_error("cannot listen on " + a->bind + " port " + std::to_string(a->port) +
-                               ": the port is in use or the address is not this machine's");
-    std::atomic<bool>& stop = install_stop_signals();
-    std::atomic<bool> ended{false};
-    std::thread server([&] {
-      srv.listen_after_bind();
-      ended = true;
-    });
-    // stop() only closes a socket listen_after_bind() has started on: a Ctrl-C before that would
-    // leave the join below waiting for ever.
-    while (!srv.is_running() && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    const std::string host = a->bind.find(':') != std::string::npos ? "[" + a->bind + "]" : a->bind;
-    const std::string page = "http://" + host + ":" + std::to_string(port) + "/";
-    std::cout << "serving " << api.size() << " loop(s) on " << page
-              << "api/loops; the workbench: " << page << (token.empty() ? "" : "?token=" + token)
-              << " (Ctrl-C stops)\n";
-    if (!token.empty())
-      std::cout << "token: " << token << "  (send 'Authorization: Bearer " << token << "')\n";
-    std::cout << std::flush;
-    while (!stop && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    // Finishes the requests in progress (a verdict being computed included), then returns.
-    srv.stop();
-    server.join();
-    if (!stop)  // the listening loop ended without being asked to: not a clean stop
-      throw std::runtime_error("the server stopped listening on " + a->bind + " port " +
-                               std::to_string(port) + " unexpectedly");
-    std::cout << "stopped" << std::endl;
+    run_workbench(std::move(loops), a->w);
     exit_code = kOk;
   });
 }

@@ -36,16 +36,18 @@ struct ServeProcess {
   std::filesystem::path out;
   int port = 0;
   std::string token;
+  // args: the command and its options ({"serve", "loop.csv", "--port", "0"}); limit_s: how long
+  // it may take to print its address.
   ServeProcess(const std::string& bin, const std::vector<std::string>& args,
-               const std::filesystem::path& tmp, const std::string& tag) {
+               const std::filesystem::path& tmp, const std::string& tag, double limit_s = 30.0) {
     out = tmp / ("serve_" + std::to_string(::getpid()) + "_" + tag + ".txt");
-    std::vector<std::string> full{bin, "serve"};
+    std::vector<std::string> full{bin};
     full.insert(full.end(), args.begin(), args.end());
     pid = spawn(full, out);
     // Its first lines: the address with the port it picked, then the token. (No std::regex:
     // GCC 12 warns inside it under the sanitizers' -O1, and warnings are errors.)
     const std::string addr = "http://127.0.0.1:", tok = "token: ";
-    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(limit_s);
     while (std::chrono::steady_clock::now() < end) {
       const std::string text = slurp(out);
       if (const auto a = text.find(addr), slash = text.find('/', a + addr.size());

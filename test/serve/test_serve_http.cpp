@@ -29,7 +29,11 @@ using valvediag::test::slurp;
 
 struct Server : valvediag::test::ServeProcess {
   Server(const std::vector<std::string>& args, const std::string& tag)
-      : ServeProcess(VALVEDIAG_BIN, args, kTmp, tag) {}
+      : ServeProcess(VALVEDIAG_BIN, with_serve(args), kTmp, tag) {}
+  static std::vector<std::string> with_serve(std::vector<std::string> args) {
+    args.insert(args.begin(), "serve");
+    return args;
+  }
 };
 
 json body(const httplib::Result& r) {
@@ -267,5 +271,27 @@ TEST_CASE("serve over HTTP: the page, a job, bad bodies, a client that hangs up"
     (void)impatient.Get("/api/loops/0/verdict", auth);
   }
   CHECK(body(c.Get("/api/loops", auth))["loops"].size() == 1);
+  CHECK(s.stop() == 0);
+}
+
+// The demo's recording in the workbench: the offline demo (simulated, fitted, reported) then the
+// server on it. Release only: the demo's fit over the paper's grid takes minutes under the
+// sanitizers.
+TEST_CASE("demo --serve opens the workbench on the demo's loop" * valvediag::test::release_only()) {
+  const fs::path dir = kTmp / "demo_serve";
+  fs::remove_all(dir);
+  valvediag::test::ServeProcess s(VALVEDIAG_BIN,
+                                  {"demo", "--offline", "--samples", "1500", "--serve", "--port",
+                                   "0", "--out-dir", dir.string()},
+                                  kTmp, "demo", 300.0);
+  REQUIRE(s.port > 0);
+  auto c = s.client();
+  const json loops = body(c.Get("/api/loops"));
+  REQUIRE(loops["loops"].size() == 1);
+  CHECK(loops["loops"][0]["name"] == "FIC101");
+  CHECK(loops["loops"][0]["samples"] == 1500);
+  const auto page = c.Get("/");
+  REQUIRE(page);
+  CHECK(page->status == 200);
   CHECK(s.stop() == 0);
 }

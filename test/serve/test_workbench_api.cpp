@@ -8,11 +8,13 @@
 #include <cmath>
 #include <thread>
 
+#include "api_checks.hpp"
 #include "valvediag/serve/workbench_api.hpp"
 
 using namespace valvediag;
 using namespace valvediag::serve;
 using nlohmann::json;
+using valvediag::test::check_error;
 
 namespace {
 
@@ -60,13 +62,6 @@ struct Fixture {
     return api.handle(r);
   }
 };
-
-void check_error(const ApiResponse& r, int status) {
-  CHECK(r.status == status);
-  REQUIRE(r.body.is_object());
-  REQUIRE(r.body.contains("error"));
-  CHECK(!r.body["error"].get<std::string>().empty());
-}
 
 }  // namespace
 

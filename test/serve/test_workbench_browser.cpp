@@ -227,8 +227,8 @@ TEST_CASE(
                                              "--samples", "1500", "--out", csv.string()},
                                             kTmp, 60.0);
   REQUIRE_MESSAGE(sim.status == 0, sim.out);
-  valvediag::test::ServeProcess server(VALVEDIAG_BIN, {csv.string(), "--port", "0", "--token"},
-                                       kTmp, "browser");
+  valvediag::test::ServeProcess server(
+      VALVEDIAG_BIN, {"serve", csv.string(), "--port", "0", "--token"}, kTmp, "browser");
   REQUIRE(server.port > 0);
   Driver d(chromedriver, chromium);
   d.session_call(

@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "../common/sanitized.hpp"
+#include "api_checks.hpp"
 #include "valvediag/core/identification.hpp"
 #include "valvediag/model/model_fit.hpp"
 #include "valvediag/serve/workbench_api.hpp"
@@ -17,6 +18,7 @@
 using namespace valvediag;
 using namespace valvediag::serve;
 using nlohmann::json;
+using valvediag::test::check_error;
 using Clock = std::chrono::steady_clock;
 using valvediag::test::kSanitizedBuild;
 
@@ -103,13 +105,6 @@ struct Api {
     }
   }
 };
-
-void check_error(const ApiResponse& r, int status) {
-  CHECK(r.status == status);
-  REQUIRE(r.body.is_object());
-  REQUIRE(r.body.contains("error"));
-  CHECK(!r.body["error"].get<std::string>().empty());
-}
 
 }  // namespace
 
