@@ -303,5 +303,15 @@ TEST_CASE(
   const std::string zoomed = base64_decode(d.session_call("GET", "/screenshot").get<std::string>());
   std::ofstream(kTmp / "workbench_zoomed.png", std::ios::binary) << zoomed;
   CHECK(look_at(zoomed).content_share > 0.2);
+
+  // Remove goes back down: the ladder's third step is the linear model again.
+  const json remove =
+      d.session_call("POST", "/element", {{"using", "css selector"}, {"value", "#remove-btn"}});
+  d.session_call("POST", "/element/" + remove[kElement].get<std::string>() + "/click");
+  const json third = d.wait_for(
+      "const rows = document.querySelectorAll('#ladder tbody tr');"
+      "return rows.length >= 3 ? rows[2].dataset.model : null;",
+      120.0, "the ladder's step after Remove");
+  CHECK(third == "linear");
   CHECK(server.stop() == 0);
 }

@@ -225,41 +225,69 @@ async function drawTrends() {
   });
 }
 
+// The model drawn against the data, and the one before it in the ladder beside it (grey), so
+// that a step's gain shows where it is made.
 async function drawModel() {
   const l = wb.loop, step = wb.shown;
+  const before = step && step.step > 0 ? wb.ladder[step.step - 1] : null;
+  const labels = ['t (s)', 'PV measured', 'PV simulated'].concat(before ? ['PV simulated, step ' + before.step] : []);
+  const colors = ['#d62728', '#222222', '#9e9e9e'].slice(0, labels.length - 1);
   if (!wb.charts.fit) {
-    wb.charts.fit = makeChart($('fit-chart'), ['t (s)', 'PV measured', 'PV simulated'],
-      ['#d62728', '#222222'], { underlayCallback: shadeFailures });
+    wb.charts.fit = makeChart($('fit-chart'), labels, colors, { underlayCallback: shadeFailures });
     wb.charts.residual = makeChart($('residual-chart'), ['t (s)', 'residual'], ['#7b4fa0'],
       { underlayCallback: shadeSplit });
   }
   $('model-name').textContent = step ? 'step ' + step.step + ', ' + step.model : 'no model yet';
+  $('compare-name').textContent = before ? '(grey: step ' + before.step + ', ' + before.model + ')' : '';
   if (!step) {
-    for (const c of [wb.charts.fit, wb.charts.residual]) c.updateOptions({ file: [[0, null].concat(c === wb.charts.fit ? [null] : [])] });
+    wb.charts.fit.updateOptions({ file: [[0, null, null]], labels: labels.slice(0, 3), colors: colors.slice(0, 2) });
+    wb.charts.residual.updateOptions({ file: [[0, null]] });
     return;
   }
-  const base = '/api/loops/' + l.id + '/models/' + step.step;
+  const base = (n) => '/api/loops/' + l.id + '/models/' + n;
   const key = l.id + '/' + step.step;
   if (!wb.simCoarse || wb.simCoarse.key !== key) {
-    const whole = await api(base + '/simulation?buckets=' + bucketsFor($('fit-chart')));
-    const model = await api(base);
+    const q = '/simulation?buckets=' + bucketsFor($('fit-chart'));
+    const whole = await api(base(step.step) + q);
+    const old = before ? await api(base(before.step) + q) : null;
+    const model = await api(base(step.step));
     wb.failing = model.where ? model.where.intervals : [];
-    wb.simCoarse = { key, fit: barRows(whole, ['pv', 'pv_sim']), res: barRows(whole, ['residual']) };
+    wb.simCoarse = { key, fit: fitRows(whole, old), res: barRows(whole, ['residual']) };
   }
   let fit = wb.simCoarse.fit, res = wb.simCoarse.res;
   if (wb.window) {
     try {
-      const s = await api(base + '/simulation?' + windowQuery($('fit-chart')));
-      fit = merge(fit, barRows(s, ['pv', 'pv_sim']), wb.window[0], wb.window[1]);
+      const q = '/simulation?' + windowQuery($('fit-chart'));
+      const s = await api(base(step.step) + q);
+      const old = before ? await api(base(before.step) + q) : null;
+      fit = merge(fit, fitRows(s, old), wb.window[0], wb.window[1]);
       res = merge(res, barRows(s, ['residual']), wb.window[0], wb.window[1]);
     } catch (e) {
       // A window before the analysed part (a lead-in left out) holds no model output.
     }
   }
   const dw = wb.window || [l.start_s, l.end_s];
-  wb.charts.fit.updateOptions({ file: fit, dateWindow: dw });
+  wb.charts.fit.updateOptions({ file: fit, labels, colors, dateWindow: dw });
   wb.charts.residual.updateOptions({ file: res, dateWindow: dw });
   wb.charts.trend.updateOptions({});  // the split may have moved
+}
+
+// Measured and simulated PV, and the earlier model's simulated PV when given (same buckets).
+function fitRows(s, old) {
+  const rows = barRows(s, ['pv', 'pv_sim']);
+  if (old) {
+    const o = barRows(old, ['pv_sim']);
+    rows.forEach((r, k) => r.push(o[k] ? o[k][1] : null));
+  }
+  return rows;
+}
+
+// The effects of the ladder's last model (the one a job starts from), each one Remove away.
+function showRemovable(step) {
+  const effects = step && step.model !== 'linear' ? step.model.split('+') : [];
+  const sel = $('remove-effect');
+  sel.replaceChildren(...effects.map((e) => el('option', { value: e, textContent: e })));
+  $('remove-box').hidden = effects.length === 0;
 }
 
 // ---- the ladder -------------------------------------------------------------------------------
@@ -295,6 +323,7 @@ async function loadLadder() {
     body.append(tr);
   }
   drawLadderChart();
+  showRemovable(wb.ladder[wb.ladder.length - 1]);
   await drawModel();
 }
 
@@ -369,6 +398,7 @@ function showFindings(d) {
 function setBusy(busy) {
   document.body.dataset.job = busy ? 'running' : 'idle';
   $('diagnose-btn').disabled = busy;
+  $('remove-btn').disabled = busy;
   for (const b of document.querySelectorAll('button.add')) b.disabled = busy;
 }
 
@@ -421,6 +451,10 @@ $('job-cancel').onclick = () => {
   if (!wb.job) return;
   $('job-cancel').disabled = true;
   api('/api/jobs/' + wb.job, { method: 'DELETE' }).catch((e) => showError(e.message));
+};
+$('remove-btn').onclick = () => {
+  const e = $('remove-effect').value;
+  if (e) runJob({ action: 'remove', effect: e }, 'removing ' + e, true);
 };
 $('diagnose-btn').onclick = () => runJob({ action: 'diagnose' }, 'diagnosing ' + (wb.shown ? wb.shown.model : 'linear'));
 
