@@ -150,7 +150,11 @@ void LoopModels::set_diagnosis(Diagnosed d) {
 }
 
 json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const ModelOptions& opt,
-             JobControl& control) {
+             JobControl& control, std::size_t max_steps) {
+  if (models.steps().size() >= max_steps)
+    throw std::invalid_argument("this loop's ladder holds " + std::to_string(max_steps) +
+                                " models, the most the workbench keeps: download the ones to keep "
+                                "and restart valvediag serve for a new ladder");
   const double Ts = d.sample_period();
   const auto current = models.last();
   // The model the request starts from: the ladder's last, else linear (diagnose's default).

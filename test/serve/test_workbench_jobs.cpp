@@ -274,6 +274,17 @@ TEST_CASE("jobs: diagnose finds the hidden stiction, adding it raises the valida
   CHECK(!rm2["error"].get<std::string>().empty());
 }
 
+TEST_CASE("jobs: a full ladder refuses more models") {
+  LoopModels models;
+  JobControl control;
+  const JobRequest fit = parse_job_request({{"action", "fit"}, {"model", "linear"}});
+  for (int i = 0; i < 2; ++i) (void)run_job(fit, sticky_loop(), models, {}, control, 2);
+  CHECK(models.steps().size() == 2);
+  CHECK_THROWS_WITH_AS(run_job(fit, sticky_loop(), models, {}, control, 2),
+                       doctest::Contains("holds 2 models"), std::invalid_argument);
+  CHECK(models.steps().size() == 2);
+}
+
 TEST_CASE("jobs: bad bodies, content types, methods and unknown ids are JSON errors") {
   Api a;
   const std::string jobs = "/api/loops/0/jobs";

@@ -31,6 +31,10 @@ struct ModelOptions {
   DiagnoseOptions diagnose_options(const LoopData& d) const;
 };
 
+// Models a loop's ladder holds at most: each keeps its simulated series, and memory stays bounded
+// however often a client adds. A job on a full ladder fails and says so.
+inline constexpr std::size_t kMaxLadderSteps = 100;
+
 struct ModelStep {
   std::string action;  // how it came: "fit", "add stiction", "remove deadband", "diagnose"
   ModelFit fit;
@@ -71,9 +75,10 @@ class LoopModels {
 
 // Runs a request on the loop `d` (the part diagnose analyses), grows `models` and returns the
 // job's result. Checks `control` for cancellation; throws Cancelled, or std::invalid_argument when
-// the model cannot be fitted.
+// the model cannot be fitted or the ladder is full (max_steps models).
 nlohmann::json run_job(const JobRequest& req, const LoopData& d, LoopModels& models,
-                       const ModelOptions& opt, JobControl& control);
+                       const ModelOptions& opt, JobControl& control,
+                       std::size_t max_steps = kMaxLadderSteps);
 
 // GET /api/loops/{id}/ladder: each step's model and fitness, as `valvediag ladder` prints them.
 nlohmann::json ladder_json(const LoopModels& models, const LoopData& d);
