@@ -50,9 +50,13 @@ void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings
   const OpRange range = w.range;
   const double validate = w.validate, min_gain = w.min_gain;
   const bool keep = w.keep_lead_in;
-  serve::VerdictFunction verdict = [=](const LoopData& d) {
-    const LoopVerdict lv = loop_verdict(
-        d, verdict_options(range, validate, keep, d.t.empty() ? 0.0 : d.t.front(), min_gain));
+  // Set on Ctrl-C: a verdict being computed stops at its next fit instead of holding the exit.
+  std::atomic<bool> closing{false};
+  serve::VerdictFunction verdict = [=, &closing](const LoopData& d) {
+    VerdictOptions vo =
+        verdict_options(range, validate, keep, d.t.empty() ? 0.0 : d.t.front(), min_gain);
+    vo.diagnose.fit.cancel = &closing;
+    const LoopVerdict lv = loop_verdict(d, vo);
     nlohmann::json j;
     add_verdict_json(j, lv);
     j["verdict_basis"] = verdict_basis(lv);
@@ -149,7 +153,9 @@ void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings
     std::cout << "token: " << token << "  (send 'Authorization: Bearer " << token << "')\n";
   std::cout << std::flush;
   while (!stop && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  // Finishes the requests in progress (a verdict being computed included), then returns.
+  // Finishes the requests in progress (a verdict being computed stops at its next fit with a
+  // 503), then returns; the jobs are cancelled when `api` goes.
+  closing = true;
   srv.stop();
   server.join();
   if (!stop)  // the listening loop ended without being asked to: not a clean stop

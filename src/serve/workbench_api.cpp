@@ -14,6 +14,7 @@
 #include <thread>
 #include <utility>
 
+#include "valvediag/core/cancel.hpp"
 #include "valvediag/serve/static_files.hpp"
 #include "valvediag/util/utc_time.hpp"
 
@@ -177,6 +178,8 @@ ApiResponse WorkbenchApi::handle(const ApiRequest& req) const {
     return r;
   } catch (const BadRequest& e) {
     return error(400, e.what());
+  } catch (const Cancelled&) {
+    return error(503, "the server is stopping: the computation was cancelled");
   } catch (const std::exception& e) {
     return error(500, std::string("internal error: ") + e.what());
   } catch (...) {

@@ -295,3 +295,21 @@ TEST_CASE("demo --serve opens the workbench on the demo's loop" * valvediag::tes
   CHECK(page->status == 200);
   CHECK(s.stop() == 0);
 }
+
+TEST_CASE("Ctrl-C stops serve promptly while a verdict is being computed") {
+  const fs::path csv = loop_csv();
+  Server s({csv.string(), "--port", "0"}, "ctrlc");
+  REQUIRE(s.port > 0);
+  std::thread asker([port = s.port] {
+    httplib::Client c("127.0.0.1", port);
+    c.set_read_timeout(120, 0);
+    const auto r = c.Get("/api/loops/0/verdict");
+    // Cancelled (503), or done before the signal came (200), or cut off by the exit.
+    if (r) CHECK((r->status == 503 || r->status == 200));
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const auto t0 = std::chrono::steady_clock::now();
+  CHECK(s.stop() == 0);
+  CHECK(std::chrono::steady_clock::now() - t0 < std::chrono::seconds(10));
+  asker.join();
+}
