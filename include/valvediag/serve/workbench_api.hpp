@@ -1,7 +1,8 @@
-// The workbench's JSON API (issue 36, `valvediag serve`): the loops the server was started with,
-// their trends decimated per bucket, their verdicts. Plain requests in, status and JSON out: no
-// sockets here (the CLI puts cpp-httplib in front), so the routing, the bounds and the token are
-// tested without a network.
+// The workbench (issue 36, `valvediag serve`): its page, and the JSON API behind it: the loops the
+// server was started with, their trends decimated per bucket, their verdicts, and the model jobs
+// that build each loop's ladder (loop_models.hpp, jobs.hpp). Plain requests in, status and body
+// out: no sockets here (the CLI puts cpp-httplib in front), so the routing, the bounds and the
+// token are tested without a network.
 //
 // Safety: the API serves only the loops it was given. No endpoint takes a file name, paths are
 // matched segment by segment against the few routes below (anything else, `..` included, is a
@@ -68,8 +69,8 @@ std::string response_type(const ApiResponse& r);
 // The cookie the page's requests carry the token in, set when `/?token=TOKEN` is opened.
 inline constexpr const char* kTokenCookie = "valvediag_token";
 
-// Bounds of the jobs: at most `workers` run at once (0: one per core) and max_queued wait; more
-// gets a 503. POST bodies beyond kMaxBody bytes are refused (413).
+// POST bodies beyond this many bytes are refused (413). The jobs' bounds are JobLimits' (a full
+// queue is a 503).
 inline constexpr std::size_t kMaxBody = 64 * 1024;
 
 // The JSON of a loop's verdict: the CLI passes the very call `diagnose` makes (loop_verdict()
