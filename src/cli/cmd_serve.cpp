@@ -173,7 +173,7 @@ void add_serve(CLI::App& app, int& exit_code) {
       "  GET /api/loops/ID/series?from=S&to=S&buckets=N   OP, PV, SP min/max per bucket\n"
       "  GET /api/loops/ID/verdict               the loop's verdict, as diagnose gives it\n"
       "  POST /api/loops/ID/jobs, GET/DELETE /api/jobs/ID   fit, diagnose, add an effect\n"
-      "  GET /api/loops/ID/ladder, /models/N, /models/N/simulation, /report\n"
+      "  GET /api/loops/ID/ladder, /diagnosis, /models/N, /models/N/simulation, /report\n"
       "  GET /                                   the workbench page (open it in a browser)\n"
       "It binds 127.0.0.1; another --bind needs --token (open the printed address with\n"
       "?token=..., or send 'Authorization: Bearer TOKEN'). It writes no file and never talks\n"
