@@ -139,10 +139,18 @@ WorkbenchApi::~WorkbenchApi() {
   jobs_.shutdown();
 }
 
+std::string token_cookie_name(const std::string& host) {
+  const std::size_t colon = host.rfind(':');
+  if (colon == std::string::npos || colon + 1 == host.size() || host.size() - colon > 6 ||
+      host.find_first_not_of("0123456789", colon + 1) != std::string::npos)
+    return kTokenCookie;
+  return std::string(kTokenCookie) + "_" + host.substr(colon + 1);
+}
+
 bool WorkbenchApi::authorized(const ApiRequest& req) const {
   if (same_secret(req.authorization, "Bearer " + token_)) return true;
   // The page's own requests carry it in the cookie set when /?token=TOKEN was opened.
-  const std::string name = std::string(kTokenCookie) + "=";
+  const std::string name = token_cookie_name(req.host) + "=";
   for (std::size_t b = 0; b < req.cookie.size();) {
     std::size_t e = req.cookie.find(';', b);
     if (e == std::string::npos) e = req.cookie.size();
@@ -174,7 +182,7 @@ ApiResponse WorkbenchApi::handle(const ApiRequest& req) const {
     // other sites' pages cannot send (SameSite=Strict) and scripts cannot read (HttpOnly).
     if (r.status == 200 && req.path == "/")
       r.set_cookie =
-          std::string(kTokenCookie) + "=" + token_ + "; Path=/; HttpOnly; SameSite=Strict";
+          token_cookie_name(req.host) + "=" + token_ + "; Path=/; HttpOnly; SameSite=Strict";
     return r;
   } catch (const BadRequest& e) {
     return error(400, e.what());

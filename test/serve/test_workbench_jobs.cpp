@@ -452,6 +452,21 @@ TEST_CASE("the token guards the page too: ?token= opens it and sets the cookie")
   CHECK(with("/api/loops", "valvediag_token=s3cret", "").status == 200);
   CHECK(with("/api/loops", "", "s3cret").status == 200);  // a script may pass it so
   CHECK(with("/api/loops", "", "s3cret").set_cookie.empty());
+  // Named after the port the page was opened on: two servers on one machine keep their own.
+  ApiRequest at;
+  at.path = "/";
+  at.host = "127.0.0.1:8081";
+  at.query.emplace("token", "s3cret");
+  CHECK(a.api.handle(at).set_cookie ==
+        "valvediag_token_8081=s3cret; Path=/; HttpOnly; SameSite=Strict");
+  at.query.clear();
+  at.path = "/api/loops";
+  at.cookie = "valvediag_token_8080=s3cret";
+  check_error(a.api.handle(at), 401);
+  at.cookie = "valvediag_token_8080=other; valvediag_token_8081=s3cret";
+  CHECK(a.api.handle(at).status == 200);
+  CHECK(token_cookie_name("[::1]:9000") == "valvediag_token_9000");
+  CHECK(token_cookie_name("localhost") == "valvediag_token");
   ApiRequest post;
   post.method = "POST";
   post.path = "/api/loops/0/jobs";

@@ -68,6 +68,10 @@ std::string response_type(const ApiResponse& r);
 
 // The cookie the page's requests carry the token in, set when `/?token=TOKEN` is opened.
 inline constexpr const char* kTokenCookie = "valvediag_token";
+// Its name for a request addressed to `host`: with the Host header's port appended
+// ("valvediag_token_8080"), since browsers keep cookies per host name, not per port, and two
+// servers on one machine would otherwise overwrite each other's token.
+std::string token_cookie_name(const std::string& host);
 
 // POST bodies beyond this many bytes are refused (413). The jobs' bounds are JobLimits' (a full
 // queue is a 503).
