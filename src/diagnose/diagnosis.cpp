@@ -465,6 +465,11 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       base_score = m.estimation;
     }
   }
+  // Each trial's k-step fitness, once: the refit test below and the gains measure it.
+  std::vector<KStepFitness> trial_k(fits.size());
+  if (step.judge.horizon > 0)
+    for (std::size_t i = 0; i < fits.size(); ++i)
+      trial_k[i] = k_step_fitness(fits[i], y, step.judge);
   // A trial whose structure reaches further back (a long dead time) starts its fit later: it is
   // fitted on fewer samples than the model, and an event in the samples it skips (a load step at
   // the start) costs the model and not the trial (measured: a dead-time trial gained 152 points
@@ -473,44 +478,40 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // fitted from earlier (a fit from its own samples on can only take gain away on the estimation
   // part) and that skips more than 1 % of the estimation samples (a few samples more or less do
   // not move a fit).
-  std::vector<std::optional<ModelFit>> same_samples(fits.size());
-  {
-    std::map<std::size_t, std::size_t> refitted;  // first sample -> the trial holding the fit
-    for (std::size_t i = 0; i < fits.size(); ++i) {
-      const ModelFit& t = fits[i];
-      const std::size_t t0 = step.fit.first_sample, e = step.fit.estimation_end;
-      if (t.first_sample <= t0 || t.estimation_end != e || e <= t.first_sample + 1 ||
-          100 * (t.first_sample - t0) <= e - t0 || t.y_sim.size() != y.size() ||
-          step.fit.y_sim.size() != y.size())
-        continue;
-      double est = fitness_percent(y, t.y_sim, t.first_sample, e) -
-                   fitness_percent(y, step.fit.y_sim, t.first_sample, e);
-      double val =
-          t.validation_fitness_percent - finite_or(step.fit.validation_fitness_percent, -1e9);
-      if (step.judge.horizon > 0) {  // what the gains below measure
-        const KStepFitness k = k_step_fitness(t, y, step.judge);
-        est = finite_or(k.estimation, -1e9) - step.judge.model_fitness_percent;
-        val = std::isfinite(step.judge.model_validation_fitness_percent)
-                  ? finite_or(k.validation, -1e9) - step.judge.model_validation_fitness_percent
-                  : est;
-      }
-      if (!(est > 0 && val > 0)) continue;
-      if (const auto it = refitted.find(t.first_sample); it != refitted.end()) {
-        same_samples[i] = same_samples[it->second];
-        continue;
-      }
+  std::map<std::size_t, ModelFit> refits_from;  // by first sample
+  std::vector<const ModelFit*> same_samples(fits.size(), nullptr);
+  for (std::size_t i = 0; i < fits.size(); ++i) {
+    const ModelFit& t = fits[i];
+    const std::size_t t0 = step.fit.first_sample, e = step.fit.estimation_end;
+    if (t.first_sample <= t0 || t.estimation_end != e || e <= t.first_sample + 1 ||
+        100 * (t.first_sample - t0) <= e - t0 || t.y_sim.size() != y.size() ||
+        step.fit.y_sim.size() != y.size())
+      continue;
+    double est = fitness_percent(y, t.y_sim, t.first_sample, e) -
+                 fitness_percent(y, step.fit.y_sim, t.first_sample, e);
+    double val =
+        t.validation_fitness_percent - finite_or(step.fit.validation_fitness_percent, -1e9);
+    if (step.judge.horizon > 0) {  // what the gains below measure
+      est = finite_or(trial_k[i].estimation, -1e9) - step.judge.model_fitness_percent;
+      val =
+          std::isfinite(step.judge.model_validation_fitness_percent)
+              ? finite_or(trial_k[i].validation, -1e9) - step.judge.model_validation_fitness_percent
+              : est;
+    }
+    if (!(est > 0 && val > 0)) continue;
+    auto it = refits_from.find(t.first_sample);
+    if (it == refits_from.end()) {
       ModelFitOptions from = fo;
       from.first_sample = t.first_sample;
       try {
         ModelFit m = fit_model(u, y, Ts, model, from);
-        if (m.y_sim.size() == y.size() && m.first_sample == t.first_sample) {
-          same_samples[i] = std::move(m);
-          refitted[t.first_sample] = i;
-        }
+        if (m.y_sim.size() != y.size() || m.first_sample != t.first_sample) continue;
+        it = refits_from.emplace(t.first_sample, std::move(m)).first;
       } catch (const std::invalid_argument&) {
-        // Too few samples from there: measured over the samples both simulate, below.
+        continue;  // too few samples from there: measured over the samples both simulate, below
       }
     }
+    same_samples[i] = &it->second;
   }
   // One-step prediction errors (prediction_error.hpp): each fit's valve position and dead time
   // in one ARX structure of order 12, on the samples every fit covers. A high order stands for
@@ -614,7 +615,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     for (const auto& e : t.effects)
       if (e.name == f.effect) f.parameters = e.parameters;
     if (step.judge.horizon > 0) {
-      const KStepFitness k = k_step_fitness(t, y, step.judge);
+      const KStepFitness& k = trial_k[i];
       KStepFitness m;
       m.estimation = step.judge.model_fitness_percent;
       m.validation = step.judge.model_validation_fitness_percent;

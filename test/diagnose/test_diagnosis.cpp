@@ -531,15 +531,13 @@ TEST_CASE("a friction the simulated output misses ranks first on its refitted pr
   }
 }
 
-// A trial whose structure reaches further back (a `delay`, searched up to an eighth of the
-// estimation part) starts its simulation later than the model. Its estimation gain is measured
-// over the samples both simulate: a start the model fails on (here a burst of measurement noise
-// in PV's first 200 samples) is no gain of the dead time's.
-TEST_CASE("a trial that starts later gains only over the samples both fits simulate") {
-  // Open loop: PV a first-order response to OP's random steps (dead time 2 samples), with
-  // measurement noise, and a burst of larger noise over samples 20-220.
+// An open loop of 3000 samples at 1 s: OP random steps (levels 30-70 held 20-80 samples), PV
+// their first-order response (pole 0.95, dead time 2 samples) plus what `measured` makes of the
+// sample index and a measurement noise of 0.2.
+std::pair<std::vector<double>, std::vector<double>> open_loop_record(
+    unsigned seed, const std::function<double(std::size_t, double)>& measured) {
   const std::size_t N = 3000;
-  std::mt19937 rng(5);
+  std::mt19937 rng(seed);
   std::uniform_real_distribution<double> level(30.0, 70.0);
   std::uniform_int_distribution<int> hold(20, 80);
   std::normal_distribution<double> noise(0.0, 0.2);
@@ -551,8 +549,20 @@ TEST_CASE("a trial that starts later gains only over the samples both fits simul
   double x = 50.0;
   for (std::size_t t = 3; t < N; ++t) {
     x = 0.95 * x + 0.05 * op[t - 3];
-    pv[t] = x + noise(rng) * (t >= 20 && t < 220 ? 20.0 : 1.0);
+    pv[t] = x + measured(t, noise(rng));
   }
+  return {op, pv};
+}
+
+// A trial whose structure reaches further back (a `delay`, searched up to an eighth of the
+// estimation part) starts its simulation later than the model. Its estimation gain is measured
+// over the samples both simulate: a start the model fails on (here a burst of measurement noise
+// in PV's first 200 samples) is no gain of the dead time's.
+TEST_CASE("a trial that starts later gains only over the samples both fits simulate") {
+  // Open loop: PV a first-order response to OP's random steps (dead time 2 samples), with
+  // measurement noise, and a burst of larger noise over samples 20-220.
+  const auto [op, pv] = open_loop_record(
+      5, [](std::size_t t, double n) { return n * (t >= 20 && t < 220 ? 20.0 : 1.0); });
   DiagnoseOptions o;
   o.candidates = {"delay"};
   const Diagnosis dg = diagnose(op, pv, 1.0, parse_model_spec("linear"), o);
@@ -573,21 +583,8 @@ TEST_CASE("a trial that starts later gains only over the samples both fits simul
 TEST_CASE("a trial that starts later is measured against the model fitted on its samples") {
   // Open loop as above, measurement noise only, and a load that lifts PV by 15 over samples
   // 40-240, inside the eighth of the record a dead-time trial skips.
-  const std::size_t N = 3000;
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> level(30.0, 70.0);
-  std::uniform_int_distribution<int> hold(20, 80);
-  std::normal_distribution<double> noise(0.0, 0.2);
-  std::vector<double> op(N), pv(N, 50.0);
-  for (std::size_t t = 0; t < N;) {
-    const double v = level(rng);
-    for (int k = hold(rng); k > 0 && t < N; --k) op[t++] = v;
-  }
-  double x = 50.0;
-  for (std::size_t t = 3; t < N; ++t) {
-    x = 0.95 * x + 0.05 * op[t - 3];
-    pv[t] = x + noise(rng) + (t >= 40 && t < 240 ? 15.0 : 0.0);
-  }
+  const auto [op, pv] = open_loop_record(
+      7, [](std::size_t t, double n) { return n + (t >= 40 && t < 240 ? 15.0 : 0.0); });
   DiagnoseOptions o;
   o.candidates = {"delay"};
   const Diagnosis dg = diagnose(op, pv, 1.0, parse_model_spec("linear"), o);
