@@ -5,10 +5,12 @@
 // then both ranges side by side.
 //
 //   valvediag_accuracy [--dev FIRST:COUNT] [--test FIRST:COUNT] [--only CATEGORY] [--jobs N]
+//                      [--json FILE]   (every case's findings with their statistics)
 //   valvediag_accuracy --plant SWEEP.json   (a sweep of ../shared/data/plant-loops: verdicts
 //                                            against the labels, per file and per valve tag)
 //
 // Develop on the development seeds; only ever run the test seeds.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -183,11 +185,50 @@ int plant_report(const std::string& path) {
   return 0;
 }
 
+// Each case with every finding's statistics, to study a ranking without running the fits again.
+nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, const char* range) {
+  const auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
+  nlohmann::json cases = nlohmann::json::array();
+  for (const auto& o : outcomes) {
+    nlohmann::json findings = nlohmann::json::array();
+    for (const auto& f : o.findings)
+      findings.push_back(
+          {{"effect", f.effect},
+           {"estimation_gain_percent", num(f.estimation_gain_percent)},
+           {"validation_gain_percent", num(f.validation_gain_percent)},
+           {"gain_percent", num(f.gain_percent)},
+           {"score", num(f.score)},
+           {"evidence", num(f.evidence)},
+           {"supported", f.supported},
+           {"parameter_count", num(f.parameter_count)},
+           {"output_bic_change", num(f.output_bic_change)},
+           {"validation_deviance_change", num(f.validation_deviance_change)},
+           {"prediction_bic_change", num(f.prediction_bic_change)},
+           {"prediction_estimation_gain_percent", num(f.prediction_estimation_gain_percent)},
+           {"prediction_validation_gain_percent", num(f.prediction_validation_gain_percent)},
+           {"indistinguishable_from", f.indistinguishable_from}});
+    cases.push_back(
+        {{"range", range},
+         {"seed", o.loop.seed},
+         {"category", o.loop.category},
+         {"hidden", o.loop.hidden},
+         {"start_model", o.loop.start_model},
+         {"error", o.error},
+         {"judge_horizon", o.judge.horizon},
+         {"samples", o.samples},
+         {"estimation_end", o.estimation_end},
+         {"model_fitness_percent", num(o.judge.model_fitness_percent)},
+         {"model_validation_fitness_percent", num(o.judge.model_validation_fitness_percent)},
+         {"findings", findings}});
+  }
+  return cases;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   Range dev{0, 156}, test{1000000, 156};
-  std::string only;
+  std::string only, json_path;
   int jobs = 0;
   bool run_dev = true, run_test = true;
   try {
@@ -210,10 +251,12 @@ int main(int argc, char** argv) {
         only = value();
       else if (a == "--jobs")
         jobs = std::stoi(value());
+      else if (a == "--json")
+        json_path = value();
       else
         throw std::invalid_argument("unknown argument " + a +
                                     " (--dev FIRST:COUNT, --test FIRST:COUNT, --dev-only, "
-                                    "--test-only, --only CATEGORY, --jobs N)");
+                                    "--test-only, --only CATEGORY, --jobs N, --json FILE)");
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
@@ -237,5 +280,15 @@ int main(int argc, char** argv) {
                          static_cast<unsigned long long>(test.first + test.count - 1)))
             .c_str());
   if (run_dev && run_test) std::printf("\n%s", format_benchmark_pair(d, t).c_str());
+  if (!json_path.empty()) {
+    nlohmann::json all = outcomes_json(d, "dev");
+    for (auto& c : outcomes_json(t, "test")) all.push_back(std::move(c));
+    std::ofstream out(json_path);
+    out << all.dump(1) << '\n';
+    if (!out) {
+      std::fprintf(stderr, "error: cannot write %s\n", json_path.c_str());
+      return 1;
+    }
+  }
   return 0;
 }

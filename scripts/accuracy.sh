@@ -8,7 +8,8 @@
 #     labels, per file and per valve tag (12 of the 18 sticky files are one valve).
 #  3. The tests' figure grids (ctest label `accuracy`: plant loops, whole-record thresholds under
 #     leave-one-tag-out, the named and seeded effect cases), which test.sh leaves out.
-# Arguments go to the benchmark (--dev FIRST:COUNT, --test FIRST:COUNT, --only EFFECT, --jobs N).
+# Arguments go to the benchmark (--dev FIRST:COUNT, --test FIRST:COUNT, --only EFFECT, --jobs N,
+# --json FILE: every case's findings with their statistics, to study a ranking offline).
 # About 25 minutes on 2 cores, and 10 more for the grids.
 set -euo pipefail
 cd "$(dirname "$0")/.."

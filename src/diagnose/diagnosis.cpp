@@ -571,9 +571,16 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     }
   }
   std::vector<PredictionError> predictions(fits.size());
+  const JudgedFit judged_model = judged(step.fit, y, step.judge);
   for (std::size_t i = 0; i < fits.size(); ++i) {
     const ModelFit& t = fits[i];
     Finding f;
+    // What the gains below are measured against: the model's judged output and samples.
+    JudgedFit reference;
+    if (same_samples[i]) reference = judged(*same_samples[i], y, step.judge);
+    const JudgedFit& ref = same_samples[i] ? reference : judged_model;
+    const std::size_t ref_from =
+        step.judge.horizon > 0 ? ref.from : std::max(ref.from, t.first_sample);
     if (pe_model.ok) {
       const PredictionError pe = refits[i].ok ? refits[i].error : prediction_of(t);
       predictions[i] = pe;
@@ -623,6 +630,24 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       f.estimation_gain_percent = finite_or(k.estimation, -1e9) - finite_or(m.estimation, -1e9);
       if (std::isfinite(m.validation))
         f.validation_gain_percent = finite_or(k.validation, -1e9) - m.validation;
+    }
+    f.parameter_count = effect_parameter_count(names[i], t, Ts);
+    if (ref.output.size() == y.size() && ref.estimation_end < y.size() &&
+        ref_from + 1 < ref.estimation_end) {
+      // Fitness is 100 (1 - |e| / |y - mean|) on each part: the ratio of what the two leave is
+      // the ratio of their error norms.
+      const auto change = [](double left_model, double gain, double n) {
+        const double left_trial = left_model - gain;
+        return left_model > 0 && left_trial > 0 && std::isfinite(gain)
+                   ? 2.0 * n * std::log(left_trial / left_model)
+                   : std::numeric_limits<double>::quiet_NaN();
+      };
+      const double n_e = effective_sample_size(y, ref.output, ref_from, ref.estimation_end);
+      const double n_v = effective_sample_size(y, ref.output, ref.estimation_end, y.size());
+      const double left_e = 100.0 - fitness_percent(y, ref.output, ref_from, ref.estimation_end);
+      f.output_bic_change =
+          change(left_e, f.estimation_gain_percent, n_e) + f.parameter_count * std::log(n_e);
+      f.validation_deviance_change = change(100.0 - ref.validation, f.validation_gain_percent, n_v);
     }
     const bool on_stiction = f.effect == "preisach" && after_stiction.has_value();
     const ResidualAnalysis& ra = on_stiction ? *after_stiction : step.residual;

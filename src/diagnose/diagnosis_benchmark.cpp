@@ -62,6 +62,14 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
     const Diagnosis dg =
         diagnose(d.op, d.pv, d.sample_period(), parse_model_spec(loop.start_model), opt);
     const auto& f = dg.last().findings;
+    o.findings = f;
+    o.judge = dg.last().judge;
+    o.samples = d.pv.size();
+    o.estimation_end = dg.last().fit.estimation_end;
+    if (o.judge.horizon == 0) {
+      o.judge.model_fitness_percent = dg.last().fit.fitness_percent;
+      o.judge.model_validation_fitness_percent = dg.last().fit.validation_fitness_percent;
+    }
     for (const auto& x : f)
       o.detail += strprintf(" %s:%.2f/%.2f/%.0f/%.3f", x.effect.c_str(), x.estimation_gain_percent,
                             x.validation_gain_percent, x.prediction_bic_change,

@@ -41,6 +41,14 @@ struct Finding {
   // A valve effect's parameters refitted to that prediction (prediction_refit.hpp), which the
   // three figures above score; empty when the trial's own are scored (no refit).
   std::vector<NamedValue> prediction_parameters;
+  // The gains as likelihoods (what the judge's errors, below, measure): the change of BIC on the
+  // estimation part, 2 n ln(error left by the trial / by the model) + k ln n, and of the deviance
+  // 2 n ln(...) on the held-out part, each n the model's effective residual samples on that part
+  // (effective_sample_size: a slow error counts once) and k the effect's free parameters.
+  // Negative: the trial explains more than its parameters cost. NaN when a fit failed.
+  double parameter_count = std::numeric_limits<double>::quiet_NaN();
+  double output_bic_change = std::numeric_limits<double>::quiet_NaN();
+  double validation_deviance_change = std::numeric_limits<double>::quiet_NaN();
   bool supported = false;                   // score and gain clear DiagnoseOptions' thresholds
   double evidence = 0.0;                    // strongest residual test pointing to it, 0..1
   std::string evidence_test;                // that test's name

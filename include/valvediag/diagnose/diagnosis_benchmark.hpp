@@ -42,6 +42,9 @@ struct BenchmarkOutcome {
   // Each finding, ranked: effect:estimation gain/held-out gain/prediction BIC change/held-out
   // prediction gain.
   std::string detail;
+  std::vector<Finding> findings;  // the step's findings, ranked (valvediag_accuracy --json)
+  KStepJudge judge;               // what their gains measure
+  std::size_t samples = 0, estimation_end = 0;  // the record's, and where its held-out part starts
   double seconds = 0.0;
   std::string error;  // the diagnosis threw: why
 };
