@@ -58,13 +58,14 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
     o << "residual:  RMS " << num(s.residual.rms, 3) << ", white-noise level "
       << num(s.residual.noise_level, 3) << "\n";
   if (const std::string jn = judge_note(s); !jn.empty()) o << "judge:     " << jn << "\n";
-  // The order is rank_by_wins' (diagnosis.cpp), not the score's: say what it is.
-  o << "findings (most likely missing first: between valve and process-lag effects alike "
-       "supported, the clearly better one-step prediction of PV (PE BIC); one that prediction "
-       "shows evidence for above a supported one it refutes (PE BIC above 0); between two "
-       "unsupported, one that prediction shows evidence for above a load or an integrator; else "
-       "a clearly larger gain on both parts, else fewer parameters, else the higher score; a "
-       "process lag above an actuator lag that commutes with it):\n";
+  // The order is rank_by_wins' then order_path_by_prediction's (diagnosis.cpp), not the
+  // score's: say what it is.
+  o << "findings (most likely missing first: among valve, dead-time and process-lag effects, "
+       "the lower PE BIC (the one-step prediction of PV), valves with memory by their nested "
+       "test, a process lag above an actuator lag that commutes with it; where a load or an "
+       "integrator stands among them: one that prediction shows evidence for above an "
+       "unsupported load, else a clearly larger gain on both parts, else fewer parameters, else "
+       "the higher score):\n";
   o << "  rank  effect          score  gain (val / est)    PE BIC    evidence\n";
   int rank = 0;
   for (const auto& f : s.findings) {
