@@ -1180,11 +1180,13 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
 
 namespace {
 
-// The valve-travel test added to a diagnosis, when the valve position is recorded.
+// The valve-travel test added to a diagnosis, when the valve position is recorded. It keeps to
+// the fits' thread budget unless given its own (a sweep runs loops side by side).
 Diagnosis with_valve_travel(Diagnosis d, const std::vector<double>& u,
-                            const std::vector<double>& mv, double Ts,
-                            const ValveTravelOptions& opt) {
-  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, opt);
+                            const std::vector<double>& mv, double Ts, const DiagnoseOptions& opt) {
+  ValveTravelOptions vt = opt.valve_travel;
+  if (vt.threads == 0) vt.threads = opt.fit.threads;
+  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, vt);
   return d;
 }
 
@@ -1193,13 +1195,13 @@ Diagnosis with_valve_travel(Diagnosis d, const std::vector<double>& u,
 Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y,
                    const std::vector<double>& mv, double Ts, const ModelSpec& model,
                    const DiagnoseOptions& opt) {
-  return with_valve_travel(diagnose(u, y, Ts, model, opt), u, mv, Ts, opt.valve_travel);
+  return with_valve_travel(diagnose(u, y, Ts, model, opt), u, mv, Ts, opt);
 }
 
 Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>& y,
                         const std::vector<double>& mv, double Ts, const ModelSpec& start,
                         const DiagnoseOptions& opt) {
-  return with_valve_travel(diagnose_auto(u, y, Ts, start, opt), u, mv, Ts, opt.valve_travel);
+  return with_valve_travel(diagnose_auto(u, y, Ts, start, opt), u, mv, Ts, opt);
 }
 
 }  // namespace valvediag

@@ -10,6 +10,7 @@
 #include <cstdio>
 
 #include "valvediag/core/hammerstein.hpp"
+#include "valvediag/core/parallel_for.hpp"
 #include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
@@ -391,16 +392,19 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
     grid.reserve(static_cast<std::size_t>(n_band * kJump * (kTau + 1)));
     for (int i = 0; i < n_band; ++i)
       for (int j = 0; j < kJump; ++j)
-        for (int t = -1; t < kTau; ++t) {
-          const Candidate c{geometric(band_lo, band_hi, i, n_band), j / (kJump - 1.0),
-                            t < 0 ? 0.0 : geometric(tau_lo, tau_hi, t, kTau), 0};
-          grid.push_back({pos.evaluate(c).sse, c});
-        }
+        for (int t = -1; t < kTau; ++t)
+          grid.push_back({HUGE_VAL,
+                          {geometric(band_lo, band_hi, i, n_band), j / (kJump - 1.0),
+                           t < 0 ? 0.0 : geometric(tau_lo, tau_hi, t, kTau), 0}});
+    // The grid and the starts on the cores: each evaluation is independent, and the results are
+    // taken in grid and start order as before.
+    parallel_for(grid.size(), worker_count(opt.threads, grid.size()),
+                 [&](unsigned, std::size_t k) { grid[k].sse = pos.evaluate(grid[k].c).sse; });
     constexpr std::size_t kStarts = 10;
     std::partial_sort(grid.begin(), grid.begin() + kStarts, grid.end(),
                       [](const Scored& a, const Scored& b) { return a.sse < b.sse; });
-    double best = HUGE_VAL;
-    for (std::size_t s = 0; s < kStarts; ++s) {
+    std::vector<Scored> ends(kStarts);
+    parallel_for(kStarts, worker_count(opt.threads, kStarts), [&](unsigned, std::size_t s) {
       Candidate g = grid[s].c;
       double start = grid[s].sse;
       for (int m : {-1, 1}) {
@@ -416,9 +420,11 @@ ValveTravel check_valve_travel(const std::vector<double>& op, const std::vector<
                 g.tau > 0 ? std::min(g.tau * q_tau, tau_hi) : tau_lo * q_tau},
                3};
       const Candidate c = polish(p, scan(pos, g, p.lo, p.hi, du));
-      const double e = pos.evaluate(c).sse;
-      if (e < best) best = e, friction = c;
-    }
+      ends[s] = {pos.evaluate(c).sse, c};
+    });
+    double best = HUGE_VAL;
+    for (const Scored& e : ends)
+      if (e.sse < best) best = e.sse, friction = e.c;
   }
   const Evaluated ef = pos.evaluate(follow, true), er = pos.evaluate(friction, true);
   v.follow_fitness_percent = fitness(ef, 0, n_est);

@@ -37,6 +37,7 @@ struct ValveTravelOptions {
   double min_band_percent = 0.5;        // band at least this share of travel (resolution)
   double deadband_jump_fraction = 0.1;  // slip jump below this share of the band: backlash
   double stuck_op_noise = 10.0;         // OP span over MV noise that a stuck valve must ignore
+  int threads = 0;                      // worker threads of the searches (0: all cores)
 };
 
 struct ValveTravel {
