@@ -5,8 +5,83 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstring>
 
 namespace valvediag::detail {
+
+namespace {
+
+// Two doubles in a vector register (GCC's vector extension): each lane's operations are the
+// IEEE ones of a scalar.
+using Pair = double __attribute__((vector_size(16)));
+
+Pair load_pair(const double* p) {
+  Pair v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
+// The dot products of l with r[0 .. K) over n samples, each summed as Eigen 3.4's VectorXd::dot
+// sums it with SSE2 (Redux.h, the linear vectorised traversal: two sums of pairs over the
+// quadruples, then the odd pair, the pair's halves and the odd sample), so that each is Eigen's
+// to the bit; in one pass they share l's loads and their chains of adds interleave (one dot's
+// chain left the core waiting).
+template <std::size_t K>
+void dots(const double* l, const std::array<const double*, 4>& r, std::size_t n, double* out) {
+  if (n < 2) {
+    for (std::size_t k = 0; k < K; ++k) out[k] = n == 1 ? l[0] * r[k][0] : 0.0;
+    return;
+  }
+  const std::size_t end2 = n / 4 * 4, end = n / 2 * 2;
+  std::array<Pair, K> s0, s1;
+  const Pair a0 = load_pair(l);
+  for (std::size_t k = 0; k < K; ++k) s0[k] = a0 * load_pair(r[k]);
+  if (end > 2) {
+    const Pair a1 = load_pair(l + 2);
+    for (std::size_t k = 0; k < K; ++k) s1[k] = a1 * load_pair(r[k] + 2);
+    for (std::size_t i = 4; i < end2; i += 4) {
+      const Pair a = load_pair(l + i), b = load_pair(l + i + 2);
+      for (std::size_t k = 0; k < K; ++k) {
+        s0[k] += a * load_pair(r[k] + i);
+        s1[k] += b * load_pair(r[k] + i + 2);
+      }
+    }
+    for (std::size_t k = 0; k < K; ++k) s0[k] += s1[k];
+    if (end > end2) {
+      const Pair a = load_pair(l + end2);
+      for (std::size_t k = 0; k < K; ++k) s0[k] += a * load_pair(r[k] + end2);
+    }
+  }
+  for (std::size_t k = 0; k < K; ++k) {
+    double res = s0[k][0] + s0[k][1];
+    for (std::size_t i = end; i < n; ++i) res += l[i] * r[k][i];
+    out[k] = res;
+  }
+}
+
+// dots() for any count: four at a time.
+void dots(const double* l, const double* const* r, std::size_t count, std::size_t n, double* out) {
+  for (std::size_t k = 0; k < count; k += 4) {
+    std::array<const double*, 4> q{};
+    const std::size_t m = std::min<std::size_t>(4, count - k);
+    for (std::size_t j = 0; j < m; ++j) q[j] = r[k + j];
+    switch (m) {
+      case 1:
+        dots<1>(l, q, n, out + k);
+        break;
+      case 2:
+        dots<2>(l, q, n, out + k);
+        break;
+      case 3:
+        dots<3>(l, q, n, out + k);
+        break;
+      default:
+        dots<4>(l, q, n, out + k);
+    }
+  }
+}
+
+}  // namespace
 
 HeDataFit::HeDataFit(const HammersteinModel& m, const std::vector<double>& op,
                      const std::vector<double>& y, double width, int max_delay, bool remember,
@@ -112,11 +187,150 @@ double HeDataFit::cost(const std::vector<Band>& bands) const {
   return costs_[key] = cost(x_);
 }
 
+double HeDataFit::cost(std::uint64_t key, const std::vector<double>& x) const {
+  if (!remember_) return cost(x);
+  const auto hit = costs_.find(key);
+  if (hit != costs_.end()) return hit->second;
+  return costs_[key] = cost(x);
+}
+
+void HeDataFit::costs(const Band* bands, std::size_t n, double* out) const {
+  n = std::min(n, kLanes);
+  // The positions, lane by lane as valve_into makes them (one band: no regions).
+  std::array<std::uint64_t, kLanes> key{};
+  std::array<double, kLanes> u_r{}, xv{}, fs{}, fd{};
+  std::array<double*, kLanes> x{};
+  for (std::size_t l = 0; l < n; ++l) {
+    lane_x_[l].resize(u_.size());
+    x[l] = lane_x_[l].data();
+    xv[l] = u_.front();
+    key[l] = mix(std::bit_cast<std::uint64_t>(xv[l]));
+    fs[l] = bands[l].fs;
+    fd[l] = bands[l].fd;
+  }
+  double u_prev = u_.front();
+  for (std::size_t t = 0; t < u_.size(); ++t) {
+    const double du = u_[t] - u_prev;
+    u_prev = u_[t];
+    for (std::size_t l = 0; l < n; ++l) {
+      const double u_cum = u_r[l] + du;
+      if (std::abs(u_cum) > fs[l]) {
+        u_r[l] = u_cum > 0 ? fd[l] : -fd[l];
+        xv[l] = u_[t] - u_r[l];
+        key[l] = mix(mix(key[l] ^ t) ^ std::bit_cast<std::uint64_t>(xv[l]));
+      } else {
+        u_r[l] = u_cum;
+      }
+      x[l][t] = xv[l];
+    }
+  }
+  // The lanes not remembered (nor repeated in an earlier lane) are solved; the first one alone
+  // when the fixed regressors are to be made.
+  std::array<std::size_t, kLanes> todo{};
+  std::size_t m = 0;
+  for (std::size_t l = 0; l < n; ++l) {
+    out[l] = -1.0;
+    if (remember_) {
+      const auto hit = costs_.find(key[l]);
+      if (hit != costs_.end()) {
+        out[l] = hit->second;
+        continue;
+      }
+      bool repeated = false;
+      for (std::size_t k = 0; k < m && !repeated; ++k) repeated = key[todo[k]] == key[l];
+      if (repeated) continue;
+    }
+    todo[m++] = l;
+  }
+  std::size_t first = 0;
+  if (m > 0 && !fixed_ready_) out[todo[first++]] = solve(lane_x_[todo[0]], nullptr);
+  if (first < m) {
+    std::array<const double*, kLanes> in{};
+    for (std::size_t k = first; k < m; ++k) in[k - first] = lane_x_[todo[k]].data();
+    for (std::size_t k = m - first; k < kLanes; ++k) in[k] = in[0];  // spare lanes repeat
+    switch (a_.size()) {
+      case 0:
+        filter_lanes<0>(in, m - first);
+        break;
+      case 1:
+        filter_lanes<1>(in, m - first);
+        break;
+      case 2:
+        filter_lanes<2>(in, m - first);
+        break;
+      case 3:
+        filter_lanes<3>(in, m - first);
+        break;
+      default:
+        filter_lanes<-1>(in, m - first);
+    }
+    for (std::size_t k = first; k < m; ++k)
+      out[todo[k]] = solve_filtered(lane_f_[k - first], nullptr);
+  }
+  for (std::size_t l = 0; l < n; ++l) {
+    if (out[l] >= 0) continue;
+    for (std::size_t k = 0; k < l; ++k)  // a lane that repeats an earlier one
+      if (key[k] == key[l]) out[l] = out[k];
+  }
+  if (remember_)
+    for (std::size_t k = 0; k < m; ++k) costs_[key[todo[k]]] = out[todo[k]];
+}
+
+// filter_n's recursion of x (not of the fixed regressors) for n series into lane_f_, the lanes
+// interleaved; each lane's operations are filter_n's, in its order.
+template <int NA>
+void HeDataFit::filter_lanes(const std::array<const double*, kLanes>& x, std::size_t n) const {
+  const std::size_t N = u_.size();
+  const std::size_t na = NA >= 0 ? static_cast<std::size_t>(NA) : a_.size();
+  const double* a = a_.data();
+  std::array<double*, kLanes> f{};
+  for (std::size_t l = 0; l < n; ++l) {
+    lane_f_[l].resize(N);
+    f[l] = lane_f_[l].data();
+  }
+  const std::size_t head = NA >= 0 ? std::min(na, N) : N;
+  for (std::size_t l = 0; l < n; ++l)
+    for (std::size_t t = 0; t < head; ++t) {
+      double v = x[l][t];
+      const std::size_t k = t >= na ? na : t;
+      for (std::size_t i = 1; i <= k; ++i) v -= a[i - 1] * f[l][t - i];
+      f[l][t] = v;
+    }
+  if constexpr (NA >= 0) {
+    // Two lanes to a vector register (GCC's vector extension: the same IEEE operations lane by
+    // lane); as arrays of doubles the past outputs went through the stack, and loading two
+    // stored halves as one vector stalled store forwarding on every sample.
+    using Pair = double __attribute__((vector_size(16)));
+    constexpr std::size_t kPairs = kLanes / 2;
+    std::array<Pair, NA + 1> c{};
+    std::array<std::array<Pair, NA + 1>, kPairs> fp{};
+    for (std::size_t i = 0; i < na; ++i) c[i] = Pair{a[i], a[i]};
+    for (std::size_t l = 0; l < n; ++l)
+      for (std::size_t i = 0; i < na; ++i) fp[l / 2][i][l % 2] = f[l][head - 1 - i];
+    for (std::size_t t = head; t < N; ++t) {
+      std::array<Pair, kPairs> out;
+      for (std::size_t p = 0; p < kPairs; ++p) {
+        Pair v{x[2 * p][t], x[2 * p + 1][t]};
+        for (std::size_t i = 0; i < na; ++i) v -= c[i] * fp[p][i];
+        for (std::size_t i = na; i-- > 1;) fp[p][i] = fp[p][i - 1];
+        if (na > 0) fp[p][0] = v;
+        out[p] = v;
+      }
+      for (std::size_t l = 0; l < n; ++l) f[l][t] = out[l / 2][l % 2];
+    }
+  }
+}
+
 double HeDataFit::solve(const std::vector<double>& x, std::vector<double>* residual) const {
   filter(x);
+  return solve_filtered(f_, residual);
+}
+
+double HeDataFit::solve_filtered(const std::vector<double>& f,
+                                 std::vector<double>* residual) const {
   // Regressors: B's taps (x through 1/A, delayed), then the fixed ones, then y.
   Columns taps;
-  for (int j = 0; j < nb_; ++j) taps.add(f_, identity_ ? 0 : static_cast<std::size_t>(nk_ + j + 1));
+  for (int j = 0; j < nb_; ++j) taps.add(f, identity_ ? 0 : static_cast<std::size_t>(nk_ + j + 1));
   Columns all = taps;
   const Columns fixed = fixed_columns();
   for (int k = 0; k < fixed.n; ++k)
@@ -254,15 +468,21 @@ void HeDataFit::scored_dots(const Columns& left, const Columns& right, Eigen::Ma
           }
     }
   for (std::size_t t = t0_; t < u_.size(); t += kBlock) {
-    const auto len = static_cast<Eigen::Index>(std::min(kBlock, u_.size() - t));
-    auto block = [&](const Column& c) {
-      return Eigen::Map<const Eigen::VectorXd>(c.v + (t - c.lag), len);
-    };
-    for (int i = 0; i < left.n; ++i)
+    const std::size_t len = std::min(kBlock, u_.size() - t);
+    auto block = [&](const Column& c) { return c.v + (t - c.lag); };
+    for (int i = 0; i < left.n; ++i) {
+      std::array<const double*, kMaxColumns> r;
+      std::array<int, kMaxColumns> at;
+      std::array<double, kMaxColumns> d;
+      std::size_t m = 0;
       for (int j = 0; j < right.n; ++j)
-        if (mirror[i][j] < 0)
-          out(i, j) += block(left.c[static_cast<std::size_t>(i)])
-                           .dot(block(right.c[static_cast<std::size_t>(j)]));
+        if (mirror[i][j] < 0) {
+          r[m] = block(right.c[static_cast<std::size_t>(j)]);
+          at[m++] = j;
+        }
+      dots(block(left.c[static_cast<std::size_t>(i)]), r.data(), m, len, d.data());
+      for (std::size_t k = 0; k < m; ++k) out(i, at[k]) += d[k];
+    }
   }
   for (int i = 0; i < left.n; ++i)
     for (int j = 0; j < right.n; ++j)
@@ -277,12 +497,10 @@ void HeDataFit::scored_dots(const Columns& left, const Columns& right, Eigen::Ma
 void HeDataFit::tap_gram(const Columns& taps, Eigen::MatrixXd& out) const {
   const double* v = taps.c[0].v;
   const std::size_t l0 = taps.c[0].lag, N = u_.size();
-  const auto n = static_cast<Eigen::Index>(N - t0_);
-  const Eigen::Map<const Eigen::VectorXd> at_l0(v + (t0_ - l0), n);
   std::array<double, kMaxColumns> base{};
-  for (int d = 0; d < taps.n; ++d)
-    base[static_cast<std::size_t>(d)] = at_l0.dot(
-        Eigen::Map<const Eigen::VectorXd>(v + (t0_ - l0 - static_cast<std::size_t>(d)), n));
+  std::array<const double*, kMaxColumns> back{};
+  for (int d = 0; d < taps.n; ++d) back[static_cast<std::size_t>(d)] = v + (t0_ - l0 - d);
+  dots(v + (t0_ - l0), back.data(), static_cast<std::size_t>(taps.n), N - t0_, base.data());
   for (int i = 0; i < taps.n; ++i)
     for (int j = i; j < taps.n; ++j) {
       const std::size_t li = taps.c[static_cast<std::size_t>(i)].lag,

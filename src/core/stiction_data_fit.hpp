@@ -76,6 +76,14 @@ class HeDataFit {
     return valve_into({{fs, fd}}, x);
   }
   double cost(double fs, double fd) const { return cost(std::vector<Band>{{fs, fd}}); }
+  // The cost of the position x whose fingerprint is key (from valve()): remembered as cost(bands)
+  // remembers it, without simulating the valve again.
+  double cost(std::uint64_t key, const std::vector<double>& x) const;
+  // Up to kLanes single bands at once, each cost as cost(fs, fd) gives it: the valve's and the
+  // filter's recursions are chains of dependent adds that leave the core waiting, and the lanes'
+  // chains interleave.
+  static constexpr std::size_t kLanes = 4;
+  void costs(const Band* bands, std::size_t n, double* out) const;
   // Remembered per valve position while the linear part stays: neighbouring bands often slip on
   // the same samples.
   double cost(const std::vector<Band>& bands) const;
@@ -103,6 +111,10 @@ class HeDataFit {
     }
   };
   double solve(const std::vector<double>& x, std::vector<double>* residual) const;
+  // solve() after the filter: f is x through 1/A (the fixed regressors ready).
+  double solve_filtered(const std::vector<double>& f, std::vector<double>* residual) const;
+  template <int NA>
+  void filter_lanes(const std::array<const double*, kLanes>& x, std::size_t n) const;
   static void through(const std::vector<double>& in, double m, const std::vector<double>& a,
                       std::vector<double>& out);
   template <int NA>
@@ -137,8 +149,9 @@ class HeDataFit {
   mutable std::unordered_map<std::uint64_t, double> costs_;  // by position fingerprint
   double var_y_ = 0.0;
   double region_lo_ = 0.0, region_width_ = 1.0;
-  mutable std::vector<double> x_, f_;        // scratch
-  mutable std::vector<double> sm_y_, sm_x_;  // scratch of sm_poles
+  mutable std::vector<double> x_, f_;                                // scratch
+  mutable std::array<std::vector<double>, kLanes> lane_x_, lane_f_;  // scratch of costs()
+  mutable std::vector<double> sm_y_, sm_x_;                          // scratch of sm_poles
   // sm_poles' first pass: y through sm_y0_poles_.
   mutable std::vector<double> sm_y0_, sm_y0_poles_;
   mutable bool sm_y0_valid_ = false;

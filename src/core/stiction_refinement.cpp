@@ -2,6 +2,7 @@
 // structure to (op, pv) (stiction_data_fit.hpp), from the probe's figures and over a coarse
 // lattice of every band; then the intervals (stiction_interval.hpp) and the regions' bands.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -172,7 +173,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
       return f.cost(x);
     });
     if (!lattice || !lattice_scoring) return;
-    pt.cost = std::min(pt.cost, held[w].cost(pt.fs, pt.fd));
+    pt.cost = std::min(pt.cost, held[w].cost(key, x));
     if (opt.global_sm_passes > 0)  // and with Steiglitz-McBride's poles
       pt.cost = std::min(pt.cost, remembered(sm_scored, key, [&] {
                            HeDataFit& g = smf[w];
@@ -272,12 +273,17 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
         cur.cost = f.cost(cur.fs, cur.fd);
         const Point c0 = cur;
         const double hh = h / 4;
+        std::vector<Band> grid;
         for (double fs = std::max(0.0, c0.fs - 4 * h); fs <= c0.fs + 4 * h + 1e-9; fs += hh)
           for (double fd = std::max(0.0, c0.fd - 4 * h); fd <= std::min(fs, c0.fd + 4 * h) + 1e-9;
-               fd += hh) {
-            const double c = f.cost(fs, fd);
-            if (c < cur.cost) cur = {c, fs, fd};
-          }
+               fd += hh)
+            grid.push_back({fs, fd});
+        // Scored a few at a time (HeDataFit::costs), then the first lowest in grid order kept.
+        std::vector<double> costs(grid.size());
+        for (std::size_t k = 0; k < grid.size(); k += HeDataFit::kLanes)
+          f.costs(grid.data() + k, std::min(HeDataFit::kLanes, grid.size() - k), costs.data() + k);
+        for (std::size_t k = 0; k < grid.size(); ++k)
+          if (costs[k] < cur.cost) cur = {costs[k], grid[k].fs, grid[k].fd};
       }
     });
     return out;
@@ -312,8 +318,15 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
     std::vector<Point> lattice(local_end, pts.end());
     const unsigned n = worker_count(opt.threads, lattice.size());
     std::vector<HeDataFit> wfits(n, winner);
-    parallel_for(lattice.size(), n, [&](unsigned w, std::size_t k) {
-      lattice[k].cost = wfits[w].cost(lattice[k].fs, lattice[k].fd);
+    // A few points per job (HeDataFit::costs).
+    constexpr std::size_t kLanes = HeDataFit::kLanes;
+    parallel_for((lattice.size() + kLanes - 1) / kLanes, n, [&](unsigned w, std::size_t j) {
+      std::array<Band, kLanes> b;
+      std::array<double, kLanes> c;
+      const std::size_t from = j * kLanes, m = std::min(kLanes, lattice.size() - from);
+      for (std::size_t l = 0; l < m; ++l) b[l] = {lattice[from + l].fs, lattice[from + l].fd};
+      wfits[w].costs(b.data(), m, c.data());
+      for (std::size_t l = 0; l < m; ++l) lattice[from + l].cost = c[l];
     });
     std::sort(lattice.begin(), lattice.end(), by_cost);
     starts = polished;
