@@ -885,6 +885,7 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
   std::vector<double> z(s.coords.size(), 0.5);
   fit.status = ModelFitStatus::Converged;
   fit.stop_reason = "no valve parameters to search";
+  std::optional<LinearFit> final_fit;  // the output-error fit of the final z, when made below
   if (!s.coords.empty()) {
     nlopt_result outcome = search_valve(s, opt);
     z = s.best_z;
@@ -914,11 +915,11 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
       // effects: keep it when its refined fit is better, so that a model with an effect added
       // never fits the estimation data worse than the model without it.
       const std::vector<double> zn = neutral_point(s);
-      const LinearFit fb =
-          est.fit_output_error(s.valve_position(z.data()), opt.output_error_iterations);
-      const LinearFit fn =
-          est.fit_output_error(s.valve_position(zn.data()), opt.output_error_iterations);
-      if (fn.ok && (!fb.ok || fn.sse < fb.sse)) z = zn;
+      LinearFit fb = est.fit_output_error(s.valve_position(z.data()), opt.output_error_iterations);
+      LinearFit fn = est.fit_output_error(s.valve_position(zn.data()), opt.output_error_iterations);
+      const bool neutral = fn.ok && (!fb.ok || fn.sse < fb.sse);
+      if (neutral) z = zn;
+      final_fit = std::move(neutral ? fn : fb);
     }
     switch (outcome) {
       case NLOPT_SUCCESS:
@@ -952,7 +953,9 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
     }
   }
   fit.x_hat = s.coords.empty() ? u : s.valve_position(z.data());
-  const LinearFit f = est.fit_output_error(fit.x_hat, opt.output_error_iterations);
+  // The fit of this x_hat is made above when the refinement chose z: the same fit, not made again.
+  const LinearFit f = final_fit ? std::move(*final_fit)
+                                : est.fit_output_error(fit.x_hat, opt.output_error_iterations);
   ++fit.evaluations;
   if (!f.ok) {
     fit.status = ModelFitStatus::NoStableModel;
