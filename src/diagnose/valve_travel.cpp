@@ -111,15 +111,27 @@ class Positioner {
     Eigen::Matrix4d A = Eigen::Matrix4d::Zero();
     Eigen::Vector4d b = Eigen::Vector4d::Zero();
     const std::size_t used = off_limits_.size();
+    // The sums of p_i p_j (j <= i) and p_i mv over the samples, each in sample order: all of
+    // row i at once, two entries to an SSE2 register (GCC's vector extension, the scalar IEEE
+    // operations lane by lane), the sums in registers. The entries above the diagonal are
+    // summed too and dropped.
+    using Pair = double __attribute__((vector_size(16)));
+    std::array<Pair, 4> lo{}, hi{};  // row i: (A(i, 0), A(i, 1)), (A(i, 2), A(i, 3))
+    Pair b_lo{}, b_hi{};
     for (const std::size_t k : off_limits_) {
       const double p[4] = {1.0, z[k], z[k] * z[k], z[k] * z[k] * z[k]};
-      for (int i = 0; i < m; ++i) {
-        b(i) += p[i] * mv_[k];
-        for (int j = 0; j <= i; ++j) A(i, j) += p[i] * p[j];
+      const Pair p01{p[0], p[1]}, p23{p[2], p[3]};
+      for (int i = 0; i < 4; ++i) {
+        lo[i] += p[i] * p01;
+        hi[i] += p[i] * p23;
       }
+      b_lo += p01 * mv_[k];
+      b_hi += p23 * mv_[k];
     }
-    for (int i = 0; i < m; ++i)
-      for (int j = i + 1; j < m; ++j) A(i, j) = A(j, i);
+    for (int i = 0; i < m; ++i) {
+      b(i) = i < 2 ? b_lo[i] : b_hi[i - 2];
+      for (int j = 0; j <= i; ++j) A(i, j) = A(j, i) = j < 2 ? lo[i][j] : hi[i][j - 2];
+    }
     Evaluated e;
     if (used < static_cast<std::size_t>(2 * m)) return e;
     // Minimum-norm solution: a valve model that never moves makes the powers collinear.
