@@ -3,6 +3,7 @@
 #include <nlopt.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <chrono>
@@ -133,9 +134,10 @@ struct Search {
   };
   std::unordered_map<PositionKey, double, PositionHash> fitted;  // sse, NaN: no stable fit
   static PositionKey key_of(const std::vector<double>& x) {
-    // xxHash64's round and finaliser, two seeds.
+    // xxHash64's rounds, merge and finaliser, two seeds: four lanes each, so that the chains of
+    // multiplies overlap.
     constexpr std::uint64_t p1 = 0x9E3779B185EBCA87u, p2 = 0xC2B2AE3D27D4EB4Fu,
-                            p3 = 0x165667B19E3779F9u;
+                            p3 = 0x165667B19E3779F9u, p4 = 0x85EBCA77C2B2AE63u;
     const auto round = [](std::uint64_t acc, std::uint64_t v) {
       return std::rotl(acc + v * p2, 31) * p1;
     };
@@ -146,13 +148,26 @@ struct Search {
       h *= p3;
       return h ^ (h >> 32);
     };
-    std::uint64_t h1 = p1 + p2, h2 = p3 ^ x.size();
-    for (const double v : x) {
-      const auto b = std::bit_cast<std::uint64_t>(v);
-      h1 = round(h1, b);
-      h2 = round(h2, b ^ p3);
+    std::array<std::uint64_t, 4> a{p1 + p2, p2, 0, 0 - p1}, b{p3, p3 ^ p4, p4, p1 ^ p3};
+    const std::size_t n = x.size(), n4 = n / 4 * 4;
+    for (std::size_t i = 0; i < n4; i += 4)
+      for (std::size_t l = 0; l < 4; ++l) {
+        const auto v = std::bit_cast<std::uint64_t>(x[i + l]);
+        a[l] = round(a[l], v);
+        b[l] = round(b[l], v ^ p4);
+      }
+    for (std::size_t i = n4; i < n; ++i) {
+      const auto v = std::bit_cast<std::uint64_t>(x[i]);
+      a[0] = round(a[0], v);
+      b[0] = round(b[0], v ^ p4);
     }
-    return {avalanche(h1), avalanche(h2)};
+    const auto merge = [&](const std::array<std::uint64_t, 4>& v) {
+      std::uint64_t h =
+          std::rotl(v[0], 1) + std::rotl(v[1], 7) + std::rotl(v[2], 12) + std::rotl(v[3], 18);
+      for (const std::uint64_t w : v) h = (h ^ round(0, w)) * p1 + p4;
+      return avalanche(h + n);
+    };
+    return {merge(a), merge(b)};
   }
   double cost(const double* za) {
     throw_if_cancelled(cancel);  // nlopt_cost keeps it, run_nlopt rethrows it
