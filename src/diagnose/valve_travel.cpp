@@ -97,7 +97,8 @@ class Positioner {
   }
 
   Evaluated evaluate(const Candidate& c, bool keep = false) const {
-    const std::size_t n = op_.size();
+    // Without `keep` only the estimation samples are read: the rest are not simulated.
+    const std::size_t n = keep ? op_.size() : n_est_;
     std::vector<double> z(n);
     BlendedHe he(c.fs(), c.fd(), static_cast<double>(c.motion), op_[0]);
     const double a = c.tau > 0.0 ? std::exp(-Ts_ / c.tau) : 0.0;
