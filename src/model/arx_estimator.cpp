@@ -3,6 +3,7 @@
 #include <array>
 #include <cmath>
 #include <complex>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <stdexcept>
@@ -225,6 +226,33 @@ double dot(const double* p, const double* q, std::size_t n) {
   return (s0 + s1) + (s2 + s3);
 }
 
+// dot() of p with each of q in one pass: the same sums (two SSE2 pairs hold each dot's four
+// partial sums, GCC's vector extension doing the scalar operations lane by lane), their chains
+// of adds interleaved and p's loads shared.
+template <std::size_t K>
+void dots(const double* p, const std::array<const double*, K>& q, std::size_t n, double* out) {
+  using Pair = double __attribute__((vector_size(16)));
+  const auto load = [](const double* v) {
+    Pair r;
+    std::memcpy(&r, v, sizeof r);
+    return r;
+  };
+  std::array<Pair, K> s01{}, s23{};
+  std::size_t k = 0;
+  for (; k + 4 <= n; k += 4) {
+    const Pair a = load(p + k), b = load(p + k + 2);
+    for (std::size_t j = 0; j < K; ++j) {
+      s01[j] += a * load(q[j] + k);
+      s23[j] += b * load(q[j] + k + 2);
+    }
+  }
+  for (std::size_t j = 0; j < K; ++j) {
+    double s0 = s01[j][0];
+    for (std::size_t i = k; i < n; ++i) s0 += p[i] * q[j][i];
+    out[j] = (s0 + s01[j][1]) + (s23[j][0] + s23[j][1]);
+  }
+}
+
 // f.template operator()<NA, NB>() with orders 1..kUnrolled unrolled, <0, 0> otherwise.
 constexpr std::size_t kUnrolled = 4;
 template <std::size_t NA, std::size_t NB = 1, class F>
@@ -355,9 +383,11 @@ ArxEstimator::Gram ArxEstimator::x_blocks(const std::vector<double>& x) const {
   g.XF.resize(L, nfixed_);
   g.Xw.resize(L);
   for (int i = 0; i < L; ++i) {
-    g.XX(i, 0) = dot(X(i), X(0), n);
-    g.XF(i, 0) = dot(X(i), W(1), n);
-    g.Xw[i] = dot(X(i), w_.data() + t0_, n);
+    std::array<double, 3> d;
+    dots<3>(X(i), {X(0), W(1), w_.data() + t0_}, n, d.data());
+    g.XX(i, 0) = d[0];
+    g.XF(i, 0) = d[1];
+    g.Xw[i] = d[2];
   }
   for (int j = 0; j + 1 < L; ++j)
     for (int i = j; i + 1 < L; ++i) g.XX(i + 1, j + 1) = g.XX(i, j) + ends(X(i), X(j));
