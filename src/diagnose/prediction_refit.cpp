@@ -37,7 +37,7 @@ struct Refit {
     ValveChain chain(std::move(chain_blocks));
     x.resize(u.size());
     chain.reset(u[0]);
-    for (std::size_t t = 0; t < u.size(); ++t) x[t] = chain.step(u[t]);
+    chain.steps(u.data(), x.data(), u.size());
     return x;
   }
   // The estimation part's one-step prediction error at unit-box point z, the profiled

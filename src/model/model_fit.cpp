@@ -92,7 +92,7 @@ struct Search {
     ValveChain c = chain(z);
     std::vector<double> x(u.size());
     c.reset(u[0]);
-    for (std::size_t t = 0; t < u.size(); ++t) x[t] = c.step(u[t]);
+    c.steps(u.data(), x.data(), u.size());
     return x;
   }
   // The coordinates searched (indices into coords); the others stay at `base`. Empty: all.
@@ -1074,7 +1074,7 @@ std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double
   } else {
     ValveChain chain(fit.valve);
     chain.reset(u[0]);
-    for (std::size_t t = 0; t < N; ++t) x[t] = chain.step(u[t]);
+    chain.steps(u.data(), x.data(), N);
   }
   const double load =
       fit.disturbance.empty()

@@ -372,4 +372,22 @@ double ValveChain::step(double u) {
   return x_ = u;
 }
 
+void ValveChain::steps(const double* u, double* x, std::size_t n) {
+  if (n == 0) return;
+  const double* in = u;
+  for (auto& e : effects_) {
+    std::visit(
+        [&](auto& block) {
+          // On a local copy: the block's state could alias x, which kept it in memory.
+          auto b = block;
+          for (std::size_t t = 0; t < n; ++t) x[t] = b.step(in[t]);
+          block = std::move(b);
+        },
+        e);
+    in = x;
+  }
+  if (in == u) std::copy(u, u + n, x);
+  x_ = x[n - 1];
+}
+
 }  // namespace valvediag

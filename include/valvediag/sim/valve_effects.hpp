@@ -37,6 +37,10 @@ class HeStiction {
   // Explicit memory, e.g. u_r = -fd, x0 = u0 + fd for "came down to u0 while slipping".
   void reset(double u0, double x0, double residual_force);
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   double residual_force() const { return u_r_; }
   double fs() const { return fs_; }
@@ -58,6 +62,10 @@ class KanoStiction {
   KanoStiction(double S, double J);  // needs S >= J >= 0
   void reset(double u0);             // stopped at x = u0, no direction yet
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   double S() const { return S_; }
   double J() const { return J_; }
@@ -78,6 +86,10 @@ class ChoudhuryStiction {
   ChoudhuryStiction(double S, double J);  // needs S >= J >= 0
   void reset(double u0);                  // stuck at x = u0, zero velocity
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   double S() const { return S_; }
   double J() const { return J_; }
@@ -96,6 +108,10 @@ class StenmanStiction {
   explicit StenmanStiction(double d);  // needs d >= 0
   void reset(double u0) { x_ = u0; }
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   double d() const { return d_; }
 
@@ -124,6 +140,10 @@ class PositionDependentStiction {
   }
   void reset(double u0, double x0, double residual_force);
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   const std::vector<Point>& points() const { return points_; }
   double fs_at(double x) const;
@@ -143,6 +163,10 @@ class Deadband {
   explicit Deadband(double d);  // needs d >= 0
   void reset(double u0) { x_ = u0; }
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   double d() const { return d_; }
 
@@ -157,6 +181,10 @@ class Saturation {
   Saturation(double lower, double upper);  // needs lower < upper
   void reset(double u0) { x_ = step(u0); }
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   double lower() const { return lower_; }
   double upper() const { return upper_; }
@@ -177,6 +205,10 @@ class Characteristic {
   Characteristic(Kind kind, double rangeability);
   void reset(double u0) { x_ = step(u0); }
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   Kind kind() const { return kind_; }
   double rangeability() const { return R_; }
@@ -243,6 +275,10 @@ class ValveChain {
   // Each block at rest with the input its predecessor gives at rest; returns the rest position.
   double reset(double u0);
   double step(double u);
+  // x[t] = step(u[t]) for t < n, from the present state: block by block over the whole series
+  // (a block's outputs depend on its own inputs only, so they are step()'s), one dispatch per
+  // block instead of one per block and sample. x may be u.
+  void steps(const double* u, double* x, std::size_t n);
   double output() const { return x_; }
   const std::vector<ValveEffect>& effects() const { return effects_; }
   std::vector<ValveEffect>& effects() { return effects_; }
