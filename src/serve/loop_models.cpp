@@ -58,6 +58,12 @@ ModelFitOptions ModelOptions::fit_options() const {
   return mo;
 }
 
+std::size_t ModelOptions::estimation_end(std::size_t n) const {
+  // fit_model's rule (model_fit.cpp): the last `validate` share held out, rounded to a sample.
+  if (!(validate > 0)) return n;
+  return static_cast<std::size_t>(std::llround(static_cast<double>(n) * (1.0 - validate)));
+}
+
 DiagnoseOptions ModelOptions::diagnose_options(const LoopData& d) const {
   // As diagnose sets them (cmd_diagnose.cpp).
   DiagnoseOptions o;
@@ -239,6 +245,7 @@ json ladder_json(const LoopModels& models, const LoopData& d) {
     for (const auto& v : s.entry.parameters) params[v.name] = number(v.value);
     r["parameters"] = params;
     r["estimation_end_s"] = number(t_at(d, s.fit.estimation_end));
+    r["valve_effect"] = has_valve_effect(s.fit.spec);
     r["time"] = s.entry.time;
     rows.push_back(std::move(r));
   }
@@ -258,6 +265,24 @@ json simulation_json(const ModelStep& s, const LoopData& d, double from, double 
   j["model"] = s.entry.model;
   j["estimation_end_s"] = number(t_at(d, s.fit.estimation_end));
   j["first_sample_s"] = number(t_at(d, s.fit.first_sample));
+  return j;
+}
+
+bool has_valve_effect(const ModelSpec& spec) {
+  return std::any_of(spec.effects.begin(), spec.effects.end(), [](const EffectSpec& e) {
+    const EffectInfo* info = find_effect(e.name);
+    return info && info->stage == EffectStage::Valve;
+  });
+}
+
+json signature_json(const ModelStep& s, const LoopData& d, double from, double to, int points) {
+  json j = decimated_path(d.t, {{"op", &d.op}, {"x", &s.fit.x_hat}}, from, to, points,
+                          s.fit.estimation_end);
+  j["model"] = s.entry.model;
+  // null when nothing is held out (validate 0)
+  j["estimation_end_s"] =
+      s.fit.estimation_end < d.t.size() ? json(d.t[s.fit.estimation_end]) : json();
+  j["x_in_op_units"] = !s.fit.spec.has("preisach");
   return j;
 }
 

@@ -36,7 +36,9 @@ ApiResponse error(int status, const std::string& message) {
 const char* kRoutes =
     "the workbench has GET / (the page), GET /api/loops, /api/loops/{id}/series?from=S&to=S&"
     "buckets=N, /api/loops/{id}/verdict, /api/loops/{id}/ladder, /api/loops/{id}/diagnosis, "
-    "/api/loops/{id}/models/{n}, /api/loops/{id}/models/{n}/simulation, /api/loops/{id}/report, "
+    "/api/loops/{id}/phase?from=S&to=S&points=N, /api/loops/{id}/models/{n}, "
+    "/api/loops/{id}/models/{n}/simulation, /api/loops/{id}/models/{n}/signature, "
+    "/api/loops/{id}/report, "
     "POST /api/loops/{id}/jobs, GET and DELETE /api/jobs/{id} (docs/workbench.md)";
 
 // The path's segments after the leading '/': "/api/loops/0" -> {api, loops, 0}. Empty segments
@@ -96,14 +98,15 @@ double finite_number(const std::string& name, const std::string& text) {
   return x;
 }
 
-int bucket_count(const std::string& text) {
+// A count parameter (buckets, points): a whole number from lo to hi.
+int whole_number(const std::string& name, const std::string& text, int lo, int hi) {
   const bool digits =
       !text.empty() && text.size() <= 6 &&
       std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; });
   const int n = digits ? std::stoi(text) : 0;
-  if (n < 1 || n > kMaxBuckets)
-    throw BadRequest("parameter 'buckets' must be a whole number from 1 to " +
-                     std::to_string(kMaxBuckets) + ", got '" + text + "'");
+  if (n < lo || n > hi)
+    throw BadRequest("parameter '" + name + "' must be a whole number from " + std::to_string(lo) +
+                     " to " + std::to_string(hi) + ", got '" + text.substr(0, 40) + "'");
   return n;
 }
 
@@ -213,21 +216,28 @@ std::optional<std::size_t> step_number(const std::string& s, std::size_t n) {
   return loop_id(s, n);
 }
 
-// from, to and buckets of /series and /simulation, checked against the time axis t.
+// from, to and buckets of /series and /simulation (points of /phase and /signature), checked
+// against the time axis t.
 struct Window {
   double from, to;
-  int buckets;
+  int count;  // buckets, or points
 };
-Window window(const ApiRequest& req, const std::vector<double>& t, const std::string& what) {
-  only_params(req, {"from", "to", "buckets"}, what + " takes from, to (s) and buckets");
+Window window(const ApiRequest& req, const std::vector<double>& t, const std::string& what,
+              bool path = false) {
+  const std::string count = path ? "points" : "buckets";
+  only_params(req, {"from", "to", count}, what + " takes from, to (s) and " + count);
+  if (t.empty()) throw BadRequest("the loop has no samples");
   const auto from_text = param(req, "from"), to_text = param(req, "to"),
-             buckets_text = param(req, "buckets");
+             count_text = param(req, count);
   const double from = from_text ? finite_number("from", *from_text) : t.front();
   const double to = to_text ? finite_number("to", *to_text) : t.back();
   if ((from_text || to_text) && !(from < to))
     throw BadRequest("'from' must be below 'to' (the record spans " + std::to_string(t.front()) +
                      " to " + std::to_string(t.back()) + " s)");
-  return {from, to, buckets_text ? bucket_count(*buckets_text) : kDefaultBuckets};
+  const int n = !count_text ? (path ? kDefaultPathPoints : kDefaultBuckets)
+                : path      ? whole_number(count, *count_text, kMinPathPoints, kMaxPathPoints)
+                            : whole_number(count, *count_text, 1, kMaxBuckets);
+  return {from, to, n};
 }
 
 ApiResponse download(std::string body, const std::string& type, const std::string& file) {
@@ -270,12 +280,13 @@ ApiResponse WorkbenchApi::route(const ApiRequest& req) const {
     only_params(req, {}, "GET /api/loops takes none");
     return {200, loops_json()};
   }
-  static const std::vector<std::string> kLoopRoutes{"series",    "verdict", "ladder",
-                                                    "diagnosis", "report",  "jobs"};
-  const bool loop_route_known = (s.size() == 4 && std::find(kLoopRoutes.begin(), kLoopRoutes.end(),
-                                                            s[3]) != kLoopRoutes.end()) ||
-                                (s.size() == 5 && s[3] == "models") ||
-                                (s.size() == 6 && s[3] == "models" && s[5] == "simulation");
+  static const std::vector<std::string> kLoopRoutes{"series",    "phase",  "verdict", "ladder",
+                                                    "diagnosis", "report", "jobs"};
+  const bool loop_route_known =
+      (s.size() == 4 &&
+       std::find(kLoopRoutes.begin(), kLoopRoutes.end(), s[3]) != kLoopRoutes.end()) ||
+      (s.size() == 5 && s[3] == "models") ||
+      (s.size() == 6 && s[3] == "models" && (s[5] == "simulation" || s[5] == "signature"));
   if (!loop_route_known) return not_found();
   if (auto bad = method_check(req, {s[3] == "jobs" ? "POST" : "GET"})) return *bad;
   const auto id = loop_id(s[2], loops_.size());
@@ -330,9 +341,22 @@ ApiResponse WorkbenchApi::loop_route(const ApiRequest& req, const std::vector<st
                             " step(s), numbered from 0 (GET /api/loops/" + std::to_string(id) +
                             "/ladder)");
     const LoopData& d = loop.model_data();
+    if (s.size() == 6 && s[5] == "signature") {
+      const ModelStep& step = *steps[*n];
+      if (!has_valve_effect(step.fit.spec) || step.fit.x_hat.size() != d.size())
+        return error(404, "step " + std::to_string(*n) + "'s model, " + step.entry.model +
+                              ", has no valve effect: its valve position is OP itself, so it has "
+                              "no signature (a model with stiction, deadband, preisach, "
+                              "saturation, characteristic or actuator-lag has)");
+      const Window w = window(req, d.t, "signature", true);
+      json j = signature_json(step, d, w.from, w.to, w.count);
+      j["id"] = id;
+      j["step"] = *n;
+      return {200, std::move(j)};
+    }
     if (s.size() == 6) {
       const Window w = window(req, d.t, "simulation");
-      json j = simulation_json(*steps[*n], d, w.from, w.to, w.buckets);
+      json j = simulation_json(*steps[*n], d, w.from, w.to, w.count);
       j["id"] = id;
       j["step"] = *n;
       return {200, std::move(j)};
@@ -341,10 +365,22 @@ ApiResponse WorkbenchApi::loop_route(const ApiRequest& req, const std::vector<st
     return download(model_json(*steps[*n], d).dump(2) + "\n", "application/json",
                     file_stem(loop.name) + "-model-" + std::to_string(*n) + ".json");
   }
+  if (s[3] == "phase") {
+    // On the part the models are fitted to, with their split: the held-out samples flagged.
+    const LoopData& d = loop.model_data();
+    if (d.t.empty() || !d.has_pv())
+      return error(404, "loop " + s[2] + " has no PV samples to plot against OP");
+    const Window w = window(req, d.t, "phase", true);
+    const std::size_t split = model_options_.estimation_end(d.size());
+    json j = decimated_path(d.t, {{"op", &d.op}, {"pv", &d.pv}}, w.from, w.to, w.count, split);
+    j["estimation_end_s"] = split < d.t.size() ? json(d.t[split]) : json();
+    j["id"] = id;
+    return {200, std::move(j)};
+  }
   const LoopData& d = loop.data;
   if (d.t.empty()) return error(404, "loop " + s[2] + " has no samples");
   const Window w = window(req, d.t, "series");
-  json j = decimated_series(d, w.from, w.to, w.buckets);  // no sample in range: invalid_argument
+  json j = decimated_series(d, w.from, w.to, w.count);  // no sample in range: invalid_argument
   j["id"] = id;
   return {200, std::move(j)};
 }
@@ -510,6 +546,66 @@ json decimated_columns(const std::vector<double>& tt, const std::vector<Column>&
          {"buckets", nb},    {"t", std::move(t)}, {"t_end", std::move(t_end)},
          {"n", std::move(n)}};
   for (auto& s : sig) j[s.c.name] = {{"min", std::move(s.lo)}, {"max", std::move(s.hi)}};
+  return j;
+}
+
+json decimated_path(const std::vector<double>& tt, const std::vector<Column>& columns, double from,
+                    double to, int points, std::size_t held_out_from) {
+  const auto b = std::lower_bound(tt.begin(), tt.end(), from);
+  const auto e = std::upper_bound(tt.begin(), tt.end(), to);
+  if (b >= e)
+    throw BadRequest("no sample between from=" + std::to_string(from) +
+                     " and to=" + std::to_string(to) + " s (the part plotted spans " +
+                     (tt.empty()
+                          ? std::string("nothing")
+                          : std::to_string(tt.front()) + " to " + std::to_string(tt.back())) +
+                     " s)");
+  const std::size_t i0 = static_cast<std::size_t>(b - tt.begin());
+  const std::size_t m = static_cast<std::size_t>(e - b);
+  const std::size_t budget = static_cast<std::size_t>(std::max(points, 1));
+  const auto value = [](const Column& c, std::size_t i) {
+    return i < c.x->size() ? (*c.x)[i] : NAN;
+  };
+  std::vector<std::size_t> keep;
+  if (m <= budget) {
+    for (std::size_t i = i0; i < i0 + m; ++i) keep.push_back(i);
+  } else {
+    // Each run keeps at most two samples per column, so the answer stays within the budget.
+    const std::size_t per_run = 2 * std::max<std::size_t>(columns.size(), 1);
+    const std::size_t runs = std::max<std::size_t>(budget / per_run, 1);
+    std::vector<std::size_t> run;
+    for (std::size_t k = 0; k < runs; ++k) {
+      const std::size_t lo = i0 + k * m / runs, hi = i0 + (k + 1) * m / runs;
+      run.clear();
+      for (const auto& c : columns) {
+        std::size_t at_min = hi, at_max = hi;  // hi: no finite sample in the run
+        for (std::size_t i = lo; i < hi; ++i) {
+          const double x = value(c, i);
+          if (!std::isfinite(x)) continue;
+          if (at_min == hi || x < value(c, at_min)) at_min = i;
+          if (at_max == hi || x > value(c, at_max)) at_max = i;
+        }
+        if (at_min < hi) run.push_back(at_min);
+        if (at_max < hi) run.push_back(at_max);
+      }
+      std::sort(run.begin(), run.end());
+      run.erase(std::unique(run.begin(), run.end()), run.end());
+      keep.insert(keep.end(), run.begin(), run.end());
+    }
+  }
+  json t = json::array(), index = json::array(), held = json::array();
+  std::vector<json> cols(columns.size(), json::array());
+  for (const std::size_t i : keep) {
+    t.push_back(tt[i]);
+    index.push_back(i);
+    held.push_back(i >= held_out_from);
+    for (std::size_t c = 0; c < columns.size(); ++c)
+      cols[c].push_back(number(value(columns[c], i)));
+  }
+  json j{{"from", from},          {"to", to},          {"samples", m},
+         {"points", keep.size()}, {"t", std::move(t)}, {"index", std::move(index)}};
+  for (std::size_t c = 0; c < columns.size(); ++c) j[columns[c].name] = std::move(cols[c]);
+  j["held_out"] = std::move(held);
   return j;
 }
 

@@ -144,6 +144,140 @@ TEST_CASE("series: bad queries are 400 with a message") {
   check_error(f.get("/api/loops", {{"x", "1"}}), 400);
 }
 
+TEST_CASE(
+    "phase: PV against OP as a path in data order, each run's extremes kept, held out flagged") {
+  Fixture f;
+  const LoopData d = long_loop();
+  const auto r = f.get("/api/loops/0/phase");
+  REQUIRE(r.status == 200);
+  const json& j = r.body;
+  CHECK(j["samples"] == 25000);
+  const std::size_t n = j["t"].size();
+  CHECK(j["points"] == n);
+  // Within the budget, and close to it: 2000 / (2 columns x 2 extremes) = 500 runs of 50.
+  CHECK(n <= static_cast<std::size_t>(kDefaultPathPoints));
+  CHECK(n >= 1000);
+  REQUIRE(j["op"].size() == n);
+  REQUIRE(j["pv"].size() == n);
+  REQUIRE(j["index"].size() == n);
+  REQUIRE(j["held_out"].size() == n);
+  // The default held-out share, 30 %, by fit_model's rule: sample 17500 on.
+  CHECK(j["estimation_end_s"].get<double>() == d.t[17500]);
+  std::size_t held = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t i = j["index"][k];
+    if (k > 0) CHECK(i > j["index"][k - 1].get<std::size_t>());  // data order, no repeats
+    CHECK(j["t"][k].get<double>() == d.t[i]);
+    CHECK(j["op"][k].get<double>() == d.op[i]);
+    CHECK(j["pv"][k].get<double>() == d.pv[i]);
+    CHECK(j["held_out"][k] == (i >= 17500));
+    held += j["held_out"][k].get<bool>();
+  }
+  CHECK(held > 0);
+  CHECK(held < n);
+  // Each of the 500 runs of 50 samples keeps the samples of its OP and PV extremes.
+  std::size_t k = 0;
+  for (std::size_t run = 0; run < 500; ++run) {
+    const std::size_t lo = run * 50, hi = lo + 50;
+    const auto [op_lo, op_hi] = std::minmax_element(d.op.begin() + lo, d.op.begin() + hi);
+    const auto [pv_lo, pv_hi] = std::minmax_element(d.pv.begin() + lo, d.pv.begin() + hi);
+    std::vector<double> op, pv;
+    for (; k < n && j["index"][k].get<std::size_t>() < hi; ++k) {
+      op.push_back(j["op"][k]);
+      pv.push_back(j["pv"][k]);
+    }
+    REQUIRE(!op.empty());
+    REQUIRE(op.size() <= 4);
+    CHECK(*std::min_element(op.begin(), op.end()) == *op_lo);
+    CHECK(*std::max_element(op.begin(), op.end()) == *op_hi);
+    CHECK(*std::min_element(pv.begin(), pv.end()) == *pv_lo);
+    CHECK(*std::max_element(pv.begin(), pv.end()) == *pv_hi);
+  }
+  CHECK(k == n);
+  // The one-sample spike stays.
+  double top = 0;
+  for (const auto& v : j["pv"]) top = std::max(top, v.get<double>());
+  CHECK(top > 500.0);
+}
+
+TEST_CASE("phase: a window, a smaller budget, and fewer samples than points") {
+  Fixture f;
+  auto r = f.get("/api/loops/0/phase", {{"from", "200"}, {"to", "300"}});
+  REQUIRE(r.status == 200);
+  CHECK(r.body["samples"] == 201);  // t = 200, 200.5, ..., 300: all of them, in order
+  CHECK(r.body["points"] == 201);
+  CHECK(r.body["t"][0].get<double>() == 200.0);
+  CHECK(r.body["t"][200].get<double>() == 300.0);
+  for (std::size_t k = 0; k < 201; ++k) CHECK(r.body["held_out"][k] == false);
+  for (const char* p : {"10", "37", "999"}) {
+    CAPTURE(p);
+    r = f.get("/api/loops/0/phase", {{"points", p}});
+    REQUIRE(r.status == 200);
+    CHECK(r.body["points"].get<int>() <= std::stoi(p));
+    CHECK(r.body["points"].get<int>() >= 2 * (std::stoi(p) / 4));  // each run's OP min and max
+    CHECK(r.body["t"].size() == r.body["points"].get<std::size_t>());
+  }
+  // Ten samples: every one; the last three (30 %) held out.
+  r = f.get("/api/loops/1/phase");
+  REQUIRE(r.status == 200);
+  CHECK(r.body["points"] == 10);
+  CHECK(r.body["pv"][3].get<double>() == -3.0);
+  CHECK(r.body["held_out"][6] == false);
+  CHECK(r.body["held_out"][7] == true);
+  CHECK(r.body["estimation_end_s"].get<double>() == 7.0);
+}
+
+TEST_CASE("phase: bad queries are 400 with a message") {
+  Fixture f;
+  using Q = std::multimap<std::string, std::string>;
+  for (const Q& q :
+       {Q{{"points", "0"}}, Q{{"points", "9"}}, Q{{"points", "10001"}}, Q{{"points", "abc"}},
+        Q{{"points", "-5"}}, Q{{"points", "1.5"}}, Q{{"points", ""}}, Q{{"buckets", "100"}},
+        Q{{"from", "nan"}}, Q{{"from", "300"}, {"to", "200"}}, Q{{"from", "1e9"}},
+        Q{{"points", "100"}, {"points", "200"}}, Q{{"step", "1"}}}) {
+    CAPTURE(q.begin()->first);
+    CAPTURE(q.begin()->second);
+    check_error(f.get("/api/loops/0/phase", q), 400);
+  }
+  check_error(f.get("/api/loops/2/phase"), 404);
+  check_error(f.get("/api/loops/0/phase/x"), 404);
+  check_error(f.get("/api/loops/0/models/0/signature"), 404);  // no model yet
+}
+
+TEST_CASE("decimated_path: the budget, each run's extremes in data order, missing samples") {
+  std::vector<double> t, a, b;
+  for (int i = 0; i < 100; ++i) {
+    t.push_back(i);
+    a.push_back(i % 10 == 3 ? 5.0 : i % 10 == 7 ? -5.0 : 0.1 * (i % 10));
+    b.push_back(i == 55 ? NAN : -0.01 * i);
+  }
+  // 20 points, 2 columns: 5 runs of 20 samples, each keeping a's and b's extremes.
+  const json j = decimated_path(t, {{"a", &a}, {"b", &b}}, 0, 99, 20, 60);
+  CHECK(j["samples"] == 100);
+  REQUIRE(j["points"].get<int>() <= 20);
+  std::vector<int> want;
+  for (int run = 0; run < 5; ++run) {
+    const int lo = run * 20;
+    // a: maximum 5 at lo+3 (first of two), minimum -5 at lo+7; b falls: max at lo, min at lo+19
+    for (int i : {lo, lo + 3, lo + 7, lo + 19}) want.push_back(i);
+  }
+  std::vector<int> got;
+  for (const auto& i : j["index"]) got.push_back(i);
+  CHECK(got == want);
+  for (std::size_t k = 0; k < got.size(); ++k) {
+    CHECK(j["t"][k].get<double>() == got[k]);
+    CHECK(j["held_out"][k] == (got[k] >= 60));
+  }
+  // A missing sample is never an extreme; where every sample is missing, null.
+  std::vector<double> gap(100, NAN);
+  const json g = decimated_path(t, {{"a", &a}, {"gap", &gap}}, 50, 60, 100, 1000);
+  CHECK(g["points"] == 11);
+  CHECK(g["gap"][0].is_null());
+  const json h = decimated_path(t, {{"b", &b}, {"gap", &gap}}, 0, 99, 10, 1000);
+  for (const auto& i : h["index"]) CHECK(i != 55);
+  CHECK_THROWS_AS(decimated_path(t, {{"a", &a}}, 200, 300, 10, 0), std::invalid_argument);
+}
+
 TEST_CASE("unknown paths, bad ids and traversal are 404; other methods 405") {
   Fixture f;
   for (const char* p : {"",

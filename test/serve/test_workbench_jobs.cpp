@@ -4,8 +4,10 @@
 // downloads, the report, bad bodies, and the embedded page with its content types and token.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 #include "../common/sanitized.hpp"
@@ -255,6 +257,46 @@ TEST_CASE("jobs: diagnose finds the hidden stiction, adding it raises the valida
   check_error(a.get("/api/loops/0/models/1/simulation?from=9000&to=9100"), 400);
   check_error(a.get("/api/loops/0/models/1/simulation?step=1"), 400);
 
+  // The valve signature: the stiction model's valve position against OP, at samples of the data.
+  CHECK(lad["steps"][0]["valve_effect"] == false);
+  CHECK(lad["steps"][1]["valve_effect"] == true);
+  check_error(a.get("/api/loops/0/models/0/signature"), 404);  // linear: x is OP
+  const LoopData& data = sticky_loop();
+  const json sig = a.get("/api/loops/0/models/1/signature?points=400").body;
+  CHECK(sig["model"] == "stiction");
+  CHECK(sig["step"] == 1);
+  CHECK(sig["samples"] == data.size());
+  CHECK(sig["x_in_op_units"] == true);
+  const std::size_t np = sig["t"].size();
+  CHECK(np == sig["points"].get<std::size_t>());
+  CHECK(np <= 400);
+  CHECK(np >= 200);  // 100 runs, each with at least OP's minimum and maximum
+  CHECK(sig["estimation_end_s"].get<double>() == s1["estimation_end_s"].get<double>());
+  const double split = sig["estimation_end_s"];
+  double x_lo = 1e9, x_hi = -1e9, op_lo = 1e9, op_hi = -1e9;
+  for (std::size_t k = 0; k < np; ++k) {
+    const std::size_t i = sig["index"][k];
+    CHECK(sig["t"][k].get<double>() == data.t[i]);
+    CHECK(sig["op"][k].get<double>() == data.op[i]);
+    CHECK(sig["held_out"][k] == (data.t[i] >= split));
+    x_lo = std::min(x_lo, sig["x"][k].get<double>());
+    x_hi = std::max(x_hi, sig["x"][k].get<double>());
+    op_lo = std::min(op_lo, sig["op"][k].get<double>());
+    op_hi = std::max(op_hi, sig["op"][k].get<double>());
+  }
+  // A sticking valve travels less than OP does, by about the band (fs 8.4) at each reversal.
+  CHECK(x_hi - x_lo < op_hi - op_lo);
+  CHECK(x_hi - x_lo > 0.5 * (op_hi - op_lo));
+  check_error(a.get("/api/loops/0/models/1/signature?points=5"), 400);
+  check_error(a.get("/api/loops/0/models/1/signature?buckets=5"), 400);
+  check_error(a.get("/api/loops/0/models/1/signature?from=9000&to=9100"), 400);
+  check_error(a.get("/api/loops/0/models/2/signature"), 404);
+  // PV against OP: the split is the models' own.
+  const json ph = a.get("/api/loops/0/phase?from=100&to=200").body;
+  CHECK(ph["estimation_end_s"].get<double>() == s1["estimation_end_s"].get<double>());
+  CHECK(ph["points"] == 201);
+  CHECK(ph["pv"][0].get<double>() == data.pv[200]);
+
   // The report of the current model, as valvediag report writes it, as a download.
   const auto rep = a.get("/api/loops/0/report");
   REQUIRE(rep.status == 200);
@@ -272,6 +314,44 @@ TEST_CASE("jobs: diagnose finds the hidden stiction, adding it raises the valida
   const json rm2 = a.wait(a.post({{"action", "remove"}, {"effect", "deadband"}}));
   CHECK(rm2["state"] == "failed");
   CHECK(!rm2["error"].get<std::string>().empty());
+}
+
+TEST_CASE(
+    "signature: the model's valve position at the chosen samples, the held-out part flagged") {
+  // A made-up fit: the valve position is OP delayed by a band, known sample by sample.
+  LoopData d;
+  ModelStep s;
+  s.fit.spec = parse_model_spec("deadband");
+  s.entry.model = "deadband";
+  for (int i = 0; i < 5000; ++i) {
+    d.t.push_back(10.0 + 2.0 * i);
+    d.op.push_back(50.0 + 10.0 * std::sin(0.01 * i));
+    d.pv.push_back(0.0);
+    s.fit.x_hat.push_back(i == 0 ? d.op[0]
+                                 : std::clamp(s.fit.x_hat.back(), d.op[i] - 2, d.op[i] + 2));
+  }
+  s.fit.estimation_end = 3500;
+  CHECK(has_valve_effect(s.fit.spec));
+  CHECK(!has_valve_effect(parse_model_spec("linear")));
+  CHECK(!has_valve_effect(parse_model_spec("delay+integrator")));
+  CHECK(has_valve_effect(parse_model_spec("actuator-lag")));
+  const json j = signature_json(s, d, d.t.front(), d.t.back(), 1000);
+  CHECK(j["model"] == "deadband");
+  CHECK(j["estimation_end_s"].get<double>() == d.t[3500]);
+  const std::size_t n = j["t"].size();
+  REQUIRE(n <= 1000);
+  REQUIRE(n >= 500);
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t i = j["index"][k];
+    if (k > 0) CHECK(i > j["index"][k - 1].get<std::size_t>());
+    CHECK(j["x"][k].get<double>() == s.fit.x_hat[i]);
+    CHECK(j["op"][k].get<double>() == d.op[i]);
+    CHECK(j["held_out"][k] == (i >= 3500));
+  }
+  // The path reaches the valve's full travel.
+  double hi = -1e9;
+  for (const auto& x : j["x"]) hi = std::max(hi, x.get<double>());
+  CHECK(hi == *std::max_element(s.fit.x_hat.begin(), s.fit.x_hat.end()));
 }
 
 TEST_CASE("jobs: a full ladder refuses more models") {

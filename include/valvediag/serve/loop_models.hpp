@@ -28,6 +28,8 @@ struct ModelOptions {
   OpRange range;          // --op-range
   int threads = 0;        // of each fit (ModelFitOptions::threads); 0: all cores
   ModelFitOptions fit_options() const;
+  // The first held-out sample of n samples, by fit_model's rule for validation_fraction.
+  std::size_t estimation_end(std::size_t n) const;
   DiagnoseOptions diagnose_options(const LoopData& d) const;
 };
 
@@ -87,6 +89,15 @@ nlohmann::json model_json(const ModelStep& s, const LoopData& d);
 // PV, the step's simulated PV and the residual, as the series' min/max buckets.
 nlohmann::json simulation_json(const ModelStep& s, const LoopData& d, double from, double to,
                                int buckets);
+// A valve effect in the model (stiction, deadband, preisach, saturation, characteristic,
+// actuator-lag): its valve position x_hat differs from OP, and it has a signature.
+bool has_valve_effect(const ModelSpec& spec);
+// The valve signature: the step's valve position (x_hat) against OP, decimated_path()'s columns
+// "op" and "x" with the held-out samples flagged, the model, estimation_end_s and x_in_op_units
+// (false for preisach, whose x_hat is scaled to ||b|| = 1). Throws std::invalid_argument when
+// no sample lies in [from, to].
+nlohmann::json signature_json(const ModelStep& s, const LoopData& d, double from, double to,
+                              int points);
 // The HTML report of the current model (the last step), as `valvediag report` writes it; its
 // diagnosis when the latest one is of that model. Throws std::invalid_argument without a model.
 std::string report_html(const LoopModels& models, const LoopData& d, const std::string& name,

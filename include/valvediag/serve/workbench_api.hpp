@@ -84,6 +84,11 @@ using VerdictFunction = std::function<nlohmann::json(const LoopData&)>;
 // Bounds of GET /api/loops/{id}/series.
 inline constexpr int kDefaultBuckets = 1000;
 inline constexpr int kMaxBuckets = 10000;
+// Bounds of the phase plots (GET /api/loops/{id}/phase, .../models/{n}/signature): points per
+// answer. The least is enough for one bucket's extremes of every column.
+inline constexpr int kDefaultPathPoints = 2000;
+inline constexpr int kMinPathPoints = 10;
+inline constexpr int kMaxPathPoints = 10000;
 
 class WorkbenchApi {
  public:
@@ -138,6 +143,15 @@ struct Column {
 };
 nlohmann::json decimated_columns(const std::vector<double>& t, const std::vector<Column>& columns,
                                  double from, double to, int buckets);
+// The samples with from <= t <= to as a path for an XY (phase) chart, in data order, at most
+// `points` of them: all when they are that few; else the samples are cut into runs of
+// consecutive samples (points / (2 * columns) runs) and each run keeps, in data order, the
+// samples where a column reaches its minimum or its maximum over the run, so the path keeps its
+// corners (a stiction cycle's jumps) and its extent. Columns: {"from","to","samples","points",
+// "t":[...], "index":[...] (sample numbers), one array per column, "held_out":[...] (sample
+// number >= held_out_from)}. Throws std::invalid_argument when no sample lies in [from, to].
+nlohmann::json decimated_path(const std::vector<double>& t, const std::vector<Column>& columns,
+                              double from, double to, int points, std::size_t held_out_from);
 
 // 32 hex digits from std::random_device (the kernel's random source on Linux).
 std::string random_token();
