@@ -127,7 +127,7 @@ struct Driver {
                          {{"binary", chromium},
                           {"args",
                            {"--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                            "--force-device-scale-factor=1", "--window-size=1400,1900",
+                            "--force-device-scale-factor=1", "--window-size=1400,2400",
                             "--user-data-dir=" + (home / "profile").string(), "--no-first-run",
                             "--no-default-browser-check", "--disable-background-networking",
                             "--disable-component-update", "--disable-sync", "--disable-extensions",
@@ -272,6 +272,42 @@ TEST_CASE(
   CHECK(d.script("return document.getElementById('model-name').textContent;")
             .get<std::string>()
             .find("stiction") != std::string::npos);
+  // The phase plots: the stiction model's valve signature and PV against OP, each a path with
+  // its estimation part (blue) and its held-out part (orange) drawn. Model B, the linear model,
+  // has no valve effect, so no signature of its own.
+  const json xy = d.wait_for(
+      "const x = wb.xy; return x.signature && x.phase && x.signature.points > 0 &&"
+      " x.phase.points > 0 && x.signature.series.length === 2 && x.phase.series.length === 2"
+      " ? [x.signature.series, x.phase.series] : null;",
+      60.0, "the valve signature and PV against OP");
+  MESSAGE("phase plots: " << xy.dump());
+  CHECK(xy[0][0]["label"] == "A, estimation part");
+  CHECK(xy[0][1]["label"] == "A, held out");
+  CHECK(xy[1][0]["label"] == "estimation part");
+  for (const auto& chart : xy)
+    for (const auto& series : chart) CHECK(series["points"].get<int>() > 50);
+  // Their canvases hold blue and orange lines, not a blank rectangle.
+  const json ink = d.script(
+      "return ['signature-chart', 'phase-chart'].map((id) => {"
+      "  const c = document.getElementById(id);"
+      "  const p = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
+      "  let blue = 0, orange = 0;"
+      "  for (let i = 0; i < p.length; i += 4) {"
+      "    if (p[i + 3] < 128) continue;"
+      "    if (p[i + 2] > p[i] + 60) ++blue; else if (p[i] > p[i + 2] + 100) ++orange; }"
+      "  return [c.width, c.height, blue, orange]; });");
+  MESSAGE("phase plot pixels (width, height, blue, orange): " << ink.dump());
+  for (const auto& c : ink) {
+    CHECK(c[0].get<int>() > 300);
+    CHECK(c[2].get<int>() > 500);
+    CHECK(c[3].get<int>() > 200);
+  }
+  // Model A and model B side by side: the new model beside the one before it.
+  const json compared = d.wait_for(
+      "const rows = [...document.querySelectorAll('#compare-table tbody tr[data-tag]')];"
+      "return rows.length === 2 ? rows.map((r) => [r.dataset.tag, Number(r.dataset.step)]) : null;",
+      30.0, "models A and B compared");
+  CHECK(compared == json::parse(R"([["A", 1], ["B", 0]])"));
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the charts' last redraw
   MESSAGE("jobs: " << d.script("return wb.history;").dump());
   const std::string png = base64_decode(d.session_call("GET", "/screenshot").get<std::string>());
@@ -313,5 +349,50 @@ TEST_CASE(
       "return rows.length >= 3 ? rows[2].dataset.model : null;",
       120.0, "the ladder's step after Remove");
   CHECK(third == "linear");
+
+  // Compare any two models: A the stiction model (step 1), B the later linear one (step 2), picked
+  // in the selectors above the chart.
+  // Remove's job, then the diagnosis of the model it left (a job done moves A to the last step).
+  d.wait_for("return wb.history.length >= 5 && " + idle + ";", 120.0, "the diagnosis after Remove");
+  const auto pick = [&](const std::string& select, const std::string& value) {
+    const json option = d.session_call(
+        "POST", "/element",
+        {{"using", "css selector"}, {"value", "#" + select + " option[value=\"" + value + "\"]"}});
+    d.session_call("POST", "/element/" + option[kElement].get<std::string>() + "/click");
+  };
+  pick("model-a", "1");
+  d.wait_for(
+      "const l = wb.charts.fit.getLabels();"
+      "return l.length === 4 && l[2].startsWith('A: step 1') && l[3].startsWith('B: step 0');",
+      30.0, "model A picked, with the step before it as B");
+  pick("model-b", "2");
+  const json labels = d.wait_for(
+      "const l = wb.charts.fit.getLabels();"
+      "return l.length === 4 && l[3].startsWith('B: step 2') ? l : null;",
+      30.0, "the chart of models A and B");
+  CHECK(labels[2] == "A: step 1, stiction");
+  CHECK(labels[3] == "B: step 2, linear");
+  // Both simulated PVs are drawn, and the fitness table holds the ladder's figures of each.
+  const json drawn = d.script(
+      "const g = wb.charts.fit; let a = 0, b = 0;"
+      "for (let i = 0; i < g.numRows(); ++i) { if (g.getValue(i, 2)) ++a; if (g.getValue(i, 3)) "
+      "++b; }"
+      "return [a, b];");
+  CHECK(drawn[0].get<int>() > 100);
+  CHECK(drawn[1].get<int>() > 100);
+  const json table = d.script(
+      "return [...document.querySelectorAll('#compare-table tbody tr[data-tag]')].map((r) =>"
+      " [r.dataset.tag, Number(r.dataset.step), Number(r.dataset.validation)]);");
+  const json ladder = d.script(
+      "return [...document.querySelectorAll('#ladder tbody tr')].map((r) =>"
+      " Number(r.dataset.validation));");
+  REQUIRE(table.size() == 2);
+  CHECK(table[0][0] == "A");
+  CHECK(table[0][1] == 1);
+  CHECK(table[0][2].get<double>() == ladder[1].get<double>());
+  CHECK(table[1][0] == "B");
+  CHECK(table[1][1] == 2);
+  CHECK(table[1][2].get<double>() == ladder[2].get<double>());
+  CHECK(table[0][2].get<double>() > table[1][2].get<double>() + 20.0);
   CHECK(server.stop() == 0);
 }

@@ -1,15 +1,19 @@
 // The workbench page: plain JavaScript over the JSON API (docs/workbench.md), charts by dygraphs.
-// One loop at a time: its trends, its current model against the data, the findings with an
-// "Add" button each, and the ladder of models fitted in this session.
+// One loop at a time: its trends, two models of the ladder (A and B) against the data, the valve
+// signature and PV against OP, the findings with an "Add" button each, and the ladder of models
+// fitted in this session.
 'use strict';
 
 const wb = {
   loops: [],
   loop: null,       // the loop shown (an entry of /api/loops)
   ladder: [],       // its steps
-  shown: null,      // the ladder step drawn against the data
+  shown: null,      // model A: the ladder step drawn against the data
+  compare: null,    // model B: the step drawn beside it, or null
+  compareChoice: 'auto',  // B as chosen: 'auto' (the step before A), 'none' or a step number
   job: null,        // the page's running job id
   charts: {},
+  xy: {},           // the phase plots as last drawn: {points, series, message}
   window: null,     // [from, to] zoomed, null: the whole record
   history: [],      // the jobs this page ran, how each ended
 };
@@ -75,6 +79,8 @@ async function selectLoop(id) {
   wb.loop = wb.loops.find((l) => l.id === id);
   wb.ladder = [];
   wb.shown = null;
+  wb.compare = null;
+  wb.compareChoice = 'auto';
   wb.window = null;
   for (const li of $('loop-list').children) li.classList.toggle('selected', Number(li.dataset.id) === id);
   $('empty').hidden = true;
@@ -193,7 +199,7 @@ function zoomTo(from, to) {
   const whole = from <= wb.loop.start_s + 1e-9 && to >= wb.loop.end_s - 1e-9;
   wb.window = whole ? null : [from, to];
   clearTimeout(wb.zoomTimer);
-  wb.zoomTimer = setTimeout(() => { drawTrends(); drawModel(); }, 150);
+  wb.zoomTimer = setTimeout(() => { drawTrends(); drawModel(); }, 150);  // drawModel: the phase plots too
 }
 
 function windowQuery(div) {
@@ -225,54 +231,58 @@ async function drawTrends() {
   });
 }
 
-// The model drawn against the data, and the one before it in the ladder beside it (grey), so
-// that a step's gain shows where it is made.
+// Model A drawn against the data and model B beside it (by default the step before A), so
+// that a step's gain shows where it is made; then the phase plots of the window.
 async function drawModel() {
-  const l = wb.loop, step = wb.shown;
-  const before = step && step.step > 0 ? wb.ladder[step.step - 1] : null;
-  const labels = ['t (s)', 'PV measured', 'PV simulated'].concat(before ? ['PV simulated, step ' + before.step] : []);
-  const colors = ['#d62728', '#222222', '#9e9e9e'].slice(0, labels.length - 1);
+  const l = wb.loop, step = wb.shown, other = step ? wb.compare : null;
+  const name = (tag, s) => tag + ': step ' + s.step + ', ' + s.model;
+  const labels = ['t (s)', 'PV measured', step ? name('A', step) : 'PV simulated'].concat(other ? [name('B', other)] : []);
+  const colors = ['#d62728', '#222222', '#3a7bd5'].slice(0, labels.length - 1);
+  const resLabels = ['t (s)', 'residual A'].concat(other ? ['residual B'] : []);
+  const resColors = ['#7b4fa0', '#3a7bd5'].slice(0, resLabels.length - 1);
   if (!wb.charts.fit) {
     wb.charts.fit = makeChart($('fit-chart'), labels, colors, { underlayCallback: shadeFailures });
-    wb.charts.residual = makeChart($('residual-chart'), ['t (s)', 'residual'], ['#7b4fa0'],
+    wb.charts.residual = makeChart($('residual-chart'), resLabels, resColors,
       { underlayCallback: shadeSplit });
   }
   $('model-name').textContent = step ? 'step ' + step.step + ', ' + step.model : 'no model yet';
-  $('compare-name').textContent = before ? '(grey: step ' + before.step + ', ' + before.model + ')' : '';
+  $('compare-name').textContent = other ? '(blue: step ' + other.step + ', ' + other.model + ')' : '';
+  showComparison();
+  drawPhasePlots();
   if (!step) {
     wb.charts.fit.updateOptions({ file: [[0, null, null]], labels: labels.slice(0, 3), colors: colors.slice(0, 2) });
-    wb.charts.residual.updateOptions({ file: [[0, null]] });
+    wb.charts.residual.updateOptions({ file: [[0, null]], labels: resLabels.slice(0, 2), colors: resColors.slice(0, 1) });
     return;
   }
   const base = (n) => '/api/loops/' + l.id + '/models/' + n;
-  const key = l.id + '/' + step.step;
+  const key = l.id + '/' + step.step + '/' + (other ? other.step : '-');
   if (!wb.simCoarse || wb.simCoarse.key !== key) {
     const q = '/simulation?buckets=' + bucketsFor($('fit-chart'));
-    const whole = await api(base(step.step) + q);
-    const old = before ? await api(base(before.step) + q) : null;
-    const model = await api(base(step.step));
+    const [whole, old, model] = await Promise.all([api(base(step.step) + q),
+      other ? api(base(other.step) + q) : null, api(base(step.step))]);
+    if (wb.loop.id !== l.id || wb.shown !== step || wb.compare !== other) return;  // chosen again
     wb.failing = model.where ? model.where.intervals : [];
-    wb.simCoarse = { key, fit: fitRows(whole, old), res: barRows(whole, ['residual']) };
+    wb.simCoarse = { key, fit: fitRows(whole, old), res: residualRows(whole, old) };
   }
   let fit = wb.simCoarse.fit, res = wb.simCoarse.res;
   if (wb.window) {
     try {
       const q = '/simulation?' + windowQuery($('fit-chart'));
-      const s = await api(base(step.step) + q);
-      const old = before ? await api(base(before.step) + q) : null;
+      const [s, old] = await Promise.all([api(base(step.step) + q), other ? api(base(other.step) + q) : null]);
       fit = merge(fit, fitRows(s, old), wb.window[0], wb.window[1]);
-      res = merge(res, barRows(s, ['residual']), wb.window[0], wb.window[1]);
+      res = merge(res, residualRows(s, old), wb.window[0], wb.window[1]);
     } catch (e) {
       // A window before the analysed part (a lead-in left out) holds no model output.
     }
   }
+  if (wb.loop.id !== l.id || wb.shown !== step || wb.compare !== other) return;
   const dw = wb.window || [l.start_s, l.end_s];
   wb.charts.fit.updateOptions({ file: fit, labels, colors, dateWindow: dw });
-  wb.charts.residual.updateOptions({ file: res, dateWindow: dw });
+  wb.charts.residual.updateOptions({ file: res, labels: resLabels, colors: resColors, dateWindow: dw });
   wb.charts.trend.updateOptions({});  // the split may have moved
 }
 
-// Measured and simulated PV, and the earlier model's simulated PV when given (same buckets).
+// Measured and simulated PV, and model B's simulated PV when given (same buckets).
 function fitRows(s, old) {
   const rows = barRows(s, ['pv', 'pv_sim']);
   if (old) {
@@ -281,6 +291,262 @@ function fitRows(s, old) {
   }
   return rows;
 }
+
+function residualRows(s, old) {
+  const rows = barRows(s, ['residual']);
+  if (old) {
+    const o = barRows(old, ['residual']);
+    rows.forEach((r, k) => r.push(o[k] ? o[k][1] : null));
+  }
+  return rows;
+}
+
+// Models A and B side by side: their fitness on the estimation and the held-out part.
+function showComparison() {
+  const body = $('compare-table').tBodies[0];
+  body.replaceChildren();
+  const a = wb.shown, b = wb.compare;
+  const row = (tag, s) => el('tr', { 'data-step': s.step, 'data-tag': tag,
+    'data-estimation': s.fitness_percent ?? '', 'data-validation': s.validation_fitness_percent ?? '' },
+  el('td', { class: 'tag' }, el('span', { class: 'key key-' + tag.toLowerCase() }), tag),
+  el('td', { class: 'model', textContent: 'step ' + s.step + ': ' + s.model }),
+  el('td', { class: 'num', textContent: fmt(s.fitness_percent) + ' %' }),
+  el('td', { class: 'num', textContent: fmt(s.validation_fitness_percent) + ' %' }));
+  if (!a) {
+    body.append(el('tr', {}, el('td', { colSpan: 4, class: 'muted', textContent: 'No model yet.' })));
+    return;
+  }
+  body.append(row('A', a));
+  if (!b) return;
+  body.append(row('B', b));
+  const diff = (x, y) => (x === null || y === null ? null : x - y);
+  const de = diff(a.fitness_percent, b.fitness_percent), dv = diff(a.validation_fitness_percent, b.validation_fitness_percent);
+  const cls = (d) => 'num ' + (d > 0 ? 'up' : d < 0 ? 'down' : '');
+  body.append(el('tr', { class: 'difference' }, el('td', { class: 'tag', textContent: 'A \u2212 B' }), el('td', {}),
+    el('td', { class: cls(de), textContent: signed(de) }), el('td', { class: cls(dv), textContent: signed(dv) })));
+}
+
+// B as chosen: the step before A by default, none, or a step of the ladder other than A.
+function resolveCompare() {
+  const a = wb.shown, c = wb.compareChoice;
+  if (typeof c === 'number' && a && c !== a.step && c < wb.ladder.length) {
+    wb.compare = wb.ladder[c];
+    return;
+  }
+  if (c !== 'none') wb.compareChoice = 'auto';
+  wb.compare = wb.compareChoice === 'auto' && a && a.step > 0 ? wb.ladder[a.step - 1] : null;
+}
+
+// The two pickers above the chart: A any step, B the step before A, none, or another step.
+function fillPickers() {
+  const a = $('model-a'), b = $('model-b');
+  const option = (value, text) => el('option', { value: String(value), textContent: text });
+  a.replaceChildren(...wb.ladder.map((s) => option(s.step, 'step ' + s.step + ': ' + s.model)));
+  a.value = wb.shown ? String(wb.shown.step) : '';
+  b.replaceChildren(option('auto', 'the step before A'), option('none', 'none'),
+    ...wb.ladder.filter((s) => !wb.shown || s.step !== wb.shown.step)
+      .map((s) => option(s.step, 'step ' + s.step + ': ' + s.model)));
+  b.value = String(wb.compareChoice);
+  a.disabled = b.disabled = wb.ladder.length === 0;
+}
+
+// Shows step n as model A (a ladder row clicked, or picked).
+function showStep(n) {
+  wb.shown = wb.ladder[n];
+  wb.followLast = n === wb.ladder.length - 1;
+  loadLadder();
+}
+
+$('model-a').onchange = (ev) => showStep(Number(ev.target.value));
+$('model-b').onchange = (ev) => {
+  const v = ev.target.value;
+  wb.compareChoice = v === 'auto' || v === 'none' ? v : Number(v);
+  loadLadder();
+};
+
+// ---- phase plots: the valve signature and PV against OP, paths drawn on a canvas -------------
+// (dygraphs draws y against an ascending x; a cycle goes back and forth in OP)
+
+const kEstimation = '#1f77b4', kHeldOut = '#ff7f0e';
+
+function pathPoints(canvas) {
+  return Math.max(400, Math.min(4000, 4 * Math.round(canvas.clientWidth || 500)));
+}
+
+// A path's estimation and held-out parts, each in data order; the held-out part starts at the
+// estimation part's last point, so the path stays joined.
+function splitPath(p, y, prefix = '') {
+  const est = { label: prefix + 'estimation part', color: kEstimation, key: 'key-est', x: [], y: [] };
+  const held = { label: prefix + 'held out', color: kHeldOut, key: 'key-held', x: [], y: [] };
+  for (let k = 0; k < p.t.length; ++k) {
+    const s = p.held_out[k] ? held : est;
+    if (s === held && held.x.length === 0 && k > 0 && !p.held_out[k - 1]) {
+      held.x.push(p.op[k - 1]);
+      held.y.push(p[y][k - 1]);
+    }
+    s.x.push(p.op[k]);
+    s.y.push(p[y][k]);
+  }
+  return [est, held].filter((s) => s.x.length > 0);
+}
+
+async function drawPhasePlots() {
+  const l = wb.loop, a = wb.shown, b = wb.compare;
+  const seq = (wb.phaseSeq = (wb.phaseSeq || 0) + 1);
+  const range = wb.window ? '&from=' + wb.window[0] + '&to=' + wb.window[1] : '';
+  const get = (path, canvas) => api('/api/loops/' + l.id + path + '?points=' + pathPoints($(canvas)) + range)
+    .catch((e) => ({ error: e.message }));
+  const [phase, sa, sb] = await Promise.all([
+    get('/phase', 'phase-chart'),
+    a && a.valve_effect ? get('/models/' + a.step + '/signature', 'signature-chart') : null,
+    b && b.valve_effect ? get('/models/' + b.step + '/signature', 'signature-chart') : null]);
+  if (seq !== wb.phaseSeq || wb.loop.id !== l.id) return;  // a newer request is on its way
+  drawXY('phase', phase.error ? { message: phase.error }
+    : { xlabel: 'OP (%)', ylabel: 'PV', series: splitPath(phase, 'pv') });
+  let sig;
+  if (!a) sig = { message: 'No model yet.' };
+  else if (!a.valve_effect) {
+    sig = { message: 'Model A (' + a.model + ') has no valve effect: its valve position is OP itself. ' +
+      'A model with stiction, deadband or another valve effect has a signature.' };
+  } else if (sa.error) sig = { message: sa.error };
+  else {
+    const series = [];
+    if (sb && !sb.error) {
+      series.push({ label: 'B: step ' + b.step + ', ' + b.model, color: '#b0b0b0', key: 'key-grey', x: sb.op, y: sb.x });
+    }
+    sig = { xlabel: 'OP (%)', ylabel: sa.x_in_op_units ? 'valve position (%)' : 'valve position (scaled)',
+      series: series.concat(splitPath(sa, 'x', 'A, ')), diagonal: sa.x_in_op_units };
+  }
+  drawXY('signature', sig);
+  $('signature-model').textContent = a ? '(step ' + a.step + ', ' + a.model + ')' : '';
+}
+
+// Round tick values covering [lo, hi], about n of them.
+function ticks(lo, hi, n) {
+  const raw = (hi - lo) / Math.max(1, n), mag = Math.pow(10, Math.floor(Math.log10(raw)));
+  const step = [1, 2, 5, 10].map((f) => f * mag).find((s) => s >= raw) || 10 * mag;
+  const out = [];
+  for (let v = Math.ceil(lo / step) * step; v <= hi + 1e-9 * step; v += step) out.push(Number(v.toPrecision(12)));
+  return { values: out, digits: Math.max(0, -Math.floor(Math.log10(step) + 1e-9)) };
+}
+
+function wrapText(c, text, x, y, width, lineHeight) {
+  let line = '';
+  for (const word of text.split(' ')) {
+    const next = line ? line + ' ' + word : word;
+    if (c.measureText(next).width > width && line) {
+      c.fillText(line, x, y);
+      y += lineHeight;
+      line = word;
+    } else line = next;
+  }
+  if (line) c.fillText(line, x, y);
+}
+
+// An XY chart: each series a path in data order; a message instead when there is nothing to draw.
+// spec: {xlabel, ylabel, series: [{label, color, key, x: [], y: []}], diagonal} or {message}.
+function drawXY(name, spec) {
+  const canvas = $(name + '-chart'), legend = $(name + '-legend');
+  const dpr = window.devicePixelRatio || 1, w = canvas.clientWidth, h = canvas.clientHeight;
+  canvas.width = Math.round(w * dpr);
+  canvas.height = Math.round(h * dpr);
+  const c = canvas.getContext('2d');
+  c.setTransform(dpr, 0, 0, dpr, 0, 0);
+  c.clearRect(0, 0, w, h);
+  const info = (wb.xy[name] = { spec, points: 0, series: [], message: spec.message || null });
+  legend.replaceChildren();
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  for (const s of spec.series || []) {
+    for (let k = 0; k < s.x.length; ++k) {
+      if (s.x[k] === null || s.y[k] === null || !isFinite(s.x[k]) || !isFinite(s.y[k])) continue;
+      x0 = Math.min(x0, s.x[k]); x1 = Math.max(x1, s.x[k]);
+      y0 = Math.min(y0, s.y[k]); y1 = Math.max(y1, s.y[k]);
+    }
+  }
+  if (!spec.message && !isFinite(x0)) info.message = spec.message = 'No samples to draw.';
+  if (spec.message) {
+    c.fillStyle = '#666';
+    c.font = '12px "DejaVu Sans", Arial, sans-serif';
+    wrapText(c, spec.message, 16, 28, w - 32, 17);
+    return;
+  }
+  const pad = (lo, hi) => {
+    const d = hi - lo > 1e-9 ? (hi - lo) * 0.04 : Math.max(1, Math.abs(hi) * 0.01);
+    return [lo - d, hi + d];
+  };
+  [x0, x1] = pad(x0, x1);
+  [y0, y1] = pad(y0, y1);
+  const m = { l: 54, r: 10, t: 8, b: 38 }, pw = w - m.l - m.r, ph = h - m.t - m.b;
+  const X = (x) => m.l + ((x - x0) / (x1 - x0)) * pw, Y = (y) => m.t + (1 - (y - y0) / (y1 - y0)) * ph;
+  c.font = '11px "DejaVu Sans", Arial, sans-serif';
+  c.lineWidth = 1;
+  const tx = ticks(x0, x1, pw / 70), ty = ticks(y0, y1, ph / 35);
+  for (const v of tx.values) {
+    const px = Math.round(X(v)) + 0.5;
+    c.strokeStyle = '#e5e8ec';
+    c.beginPath(); c.moveTo(px, m.t); c.lineTo(px, m.t + ph); c.stroke();
+    c.fillStyle = '#555';
+    c.textAlign = 'center';
+    c.fillText(v.toFixed(tx.digits), px, m.t + ph + 14);
+  }
+  for (const v of ty.values) {
+    const py = Math.round(Y(v)) + 0.5;
+    c.strokeStyle = '#e5e8ec';
+    c.beginPath(); c.moveTo(m.l, py); c.lineTo(m.l + pw, py); c.stroke();
+    c.fillStyle = '#555';
+    c.textAlign = 'right';
+    c.fillText(v.toFixed(ty.digits), m.l - 5, py + 4);
+  }
+  c.strokeStyle = '#999';
+  c.strokeRect(m.l + 0.5, m.t + 0.5, pw, ph);
+  c.fillStyle = '#333';
+  c.textAlign = 'center';
+  c.fillText(spec.xlabel, m.l + pw / 2, h - 6);
+  c.save();
+  c.translate(13, m.t + ph / 2);
+  c.rotate(-Math.PI / 2);
+  c.fillText(spec.ylabel, 0, 0);
+  c.restore();
+  c.save();
+  c.beginPath();
+  c.rect(m.l, m.t, pw, ph);
+  c.clip();
+  if (spec.diagonal) {  // where a valve without an effect would be: x = OP
+    const lo = Math.min(x0, y0), hi = Math.max(x1, y1);
+    c.strokeStyle = '#888';
+    c.setLineDash([5, 4]);
+    c.beginPath(); c.moveTo(X(lo), Y(lo)); c.lineTo(X(hi), Y(hi)); c.stroke();
+    c.setLineDash([]);
+  }
+  for (const s of spec.series) {
+    c.strokeStyle = s.color;
+    c.lineWidth = 1.2;
+    c.lineJoin = 'round';
+    c.beginPath();
+    let pen = false, n = 0;
+    for (let k = 0; k < s.x.length; ++k) {
+      if (s.x[k] === null || s.y[k] === null) { pen = false; continue; }
+      if (pen) c.lineTo(X(s.x[k]), Y(s.y[k])); else c.moveTo(X(s.x[k]), Y(s.y[k]));
+      pen = true;
+      ++n;
+    }
+    c.stroke();
+    info.points += n;
+    info.series.push({ label: s.label, points: n });
+    legend.append(el('span', { class: 'item' }, el('span', { class: 'key ' + s.key }), s.label));
+  }
+  c.restore();
+  // The diagonal's key only where it crosses the plot (a zoomed window may lie beside it).
+  if (spec.diagonal && Math.max(x0, y0) <= Math.min(x1, y1)) legend.append(el('span', { class: 'item' }, el('span', { class: 'key key-diag' }), 'valve = OP'));
+}
+
+// Canvases do not follow the page's width by themselves: drawn again at the new size.
+window.addEventListener('resize', () => {
+  clearTimeout(wb.resizeTimer);
+  wb.resizeTimer = setTimeout(() => {
+    for (const [name, x] of Object.entries(wb.xy)) drawXY(name, x.spec);
+  }, 150);
+});
 
 // The effects of the ladder's last model (the one a job starts from), each one Remove away.
 function showRemovable(step) {
@@ -299,8 +565,11 @@ async function loadLadder() {
   wb.ladder = lad.steps;
   if (wb.ladder.length > 0 && (!wb.shown || wb.shown.step >= wb.ladder.length || wb.followLast)) {
     wb.shown = wb.ladder[wb.ladder.length - 1];
+  } else if (wb.shown) {
+    wb.shown = wb.ladder[wb.shown.step];
   }
-  wb.followLast = true;
+  resolveCompare();
+  fillPickers();
   const body = $('ladder').tBodies[0];
   body.replaceChildren();
   for (const s of wb.ladder) {
@@ -308,17 +577,18 @@ async function loadLadder() {
     const tr = el('tr', { 'data-step': s.step, 'data-validation': s.validation_fitness_percent ?? '',
       'data-estimation': s.fitness_percent ?? '', 'data-model': s.model },
       el('td', { textContent: s.step }),
+      el('td', { class: 'tag', textContent: wb.shown && s.step === wb.shown.step ? 'A'
+        : wb.compare && s.step === wb.compare.step ? 'B' : '' }),
       el('td', { class: 'model', textContent: s.model, title: s.action }),
       el('td', { class: 'num', textContent: fmt(s.fitness_percent) + ' %' }),
       el('td', { class: 'num', textContent: fmt(s.validation_fitness_percent) + ' %' }),
       el('td', { class: 'num ' + (change > 0 ? 'up' : change < 0 ? 'down' : ''), textContent: signed(change) }),
       el('td', {}, el('a', { href: '/api/loops/' + id + '/models/' + s.step, textContent: 'JSON' })));
     if (wb.shown && s.step === wb.shown.step) tr.classList.add('current');
+    if (wb.compare && s.step === wb.compare.step) tr.classList.add('compared');
     tr.onclick = (ev) => {
       if (ev.target.tagName === 'A') return;
-      wb.shown = s;
-      wb.followLast = s.step === wb.ladder.length - 1;
-      loadLadder().then(drawModel);
+      showStep(s.step);
     };
     body.append(tr);
   }
@@ -441,6 +711,7 @@ async function runJob(body, text, rediagnose = false) {
   if (wb.loop.id !== id) return;
   if (st.state === 'done') {
     wb.followLast = true;
+    wb.compareChoice = 'auto';  // the new model beside the one before it
     await loadLadder();
     await loadDiagnosis();
     if (rediagnose) runJob({ action: 'diagnose' }, 'diagnosing ' + wb.shown.model);
