@@ -268,6 +268,7 @@ void add_demo(CLI::App& app, int& exit_code) {
       std::vector<std::string> notes;
       std::vector<serve::ServedLoop> loops;
       loops.push_back(served_loop("FIC101", d, w, notes));
+      loops.back().history = history;  // the workbench's models join the demo's ladder
       for (const auto& n : notes) std::cout << "note: " << n << "\n";
       std::cout << "\n" << (a->offline ? "" : "6. ") << "the workbench on FIC101:\n";
       run_workbench(std::move(loops), w);

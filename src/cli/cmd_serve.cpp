@@ -13,6 +13,7 @@
 
 #include "commands.hpp"
 #include "data_options.hpp"
+#include "history_options.hpp"
 #include "stop_signal.hpp"
 #include "valvediag/serve/workbench_api.hpp"
 #include "valvediag/sweep/loop_verdict.hpp"
@@ -174,10 +175,12 @@ void add_serve(CLI::App& app, int& exit_code) {
       "  GET /api/loops/ID/verdict               the loop's verdict, as diagnose gives it\n"
       "  POST /api/loops/ID/jobs, GET/DELETE /api/jobs/ID   fit, diagnose, add an effect\n"
       "  GET /api/loops/ID/ladder, /diagnosis, /models/N, /models/N/simulation, /report\n"
+      "  GET /api/loops/ID/phase, /models/N/signature   PV and the valve position against OP\n"
       "  GET /                                   the workbench page (open it in a browser)\n"
       "It binds 127.0.0.1; another --bind needs --token (open the printed address with\n"
-      "?token=..., or send 'Authorization: Bearer TOKEN'). It writes no file and never talks\n"
-      "to a PLC. See docs/workbench.md.\n"
+      "?token=..., or send 'Authorization: Bearer TOKEN'). It writes no file but each file's\n"
+      "model history in the state directory, as fit and diagnose do (--no-history: none),\n"
+      "and never talks to a PLC. See docs/workbench.md.\n"
       "Examples:\n"
       "  valvediag serve loop.csv                 (open http://127.0.0.1:8080/)\n"
       "  valvediag serve loops/*.csv --port 0     (a free port, printed)\n"
@@ -187,6 +190,7 @@ void add_serve(CLI::App& app, int& exit_code) {
     DataOptions layout;
     WorkbenchSettings w;
     std::string op_range;
+    HistoryOptions hist;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("files", a->files, "data files (CSV or .mat), one loop each")->required();
@@ -208,6 +212,9 @@ void add_serve(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_flag("--keep-lead-in", a->w.keep_lead_in,
                 "verdict: analyse the whole record, quiet lead-in included");
+  cmd->add_flag("--no-history", a->hist.off,
+                "do not add the models to each file's model history in the state directory "
+                "(the one fit, diagnose and ladder use)");
   cmd->callback([a, &exit_code] {
     check_workbench_bind(a->w);                      // before any data is read
     (void)split_check_shares(a->w.validate, false);  // the range check diagnose makes
@@ -219,8 +226,13 @@ void add_serve(CLI::App& app, int& exit_code) {
       std::vector<std::string> notes;
       LoopData d = load_data(in, notes);
       std::string name = d.tag.empty() ? std::filesystem::path(f).stem().string() : d.tag;
+      // The history fit and diagnose keep for this data read this way: `ladder` lists the
+      // workbench's models with theirs.
+      const std::string history = a->hist.off ? "" : history_place(a->hist, in, d).file;
       loops.push_back(served_loop(std::move(name), std::move(d), a->w, notes));
+      loops.back().history = history;
       for (const auto& n : notes) std::cout << "note: " << f << ": " << n << "\n";
+      if (!history.empty()) std::cout << "model history of " << f << ": " << history << "\n";
     }
     run_workbench(std::move(loops), a->w);
     exit_code = kOk;

@@ -41,6 +41,18 @@ std::shared_ptr<const ModelStep> make_step(const std::string& action, ModelFit f
   return s;
 }
 
+// Appends the new models' rows to the loop's history file. One writer at a time: two loops served
+// from the same data share a file, and each append reads and rewrites it.
+json record_history(const LoopModels& models, const std::vector<HistoryEntry>& entries) {
+  if (models.history_file().empty() || entries.empty()) return json();
+  static std::mutex writing;
+  std::lock_guard<std::mutex> lock(writing);
+  std::string why;
+  std::size_t total = 0;
+  if (try_append_history(models.history_file(), entries, why, &total)) return {{"entries", total}};
+  return {{"error", why + "; the models stand without it"}};
+}
+
 json step_summary(std::size_t n, const ModelStep& s) {
   return {{"step", n},
           {"model", s.entry.model},
@@ -176,14 +188,16 @@ json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const
     throw_if_cancelled(control.cancel_flag());
     // The fits the diagnosis made join the ladder when they are new: its start on an empty
     // ladder, the climb's steps after it.
-    std::size_t added = 0;
+    std::vector<HistoryEntry> entries;
     for (std::size_t k = 0; k < r->steps.size(); ++k) {
       if (k == 0 && current) continue;
       const auto& s = r->steps[k];
       if (s.fit.status == ModelFitStatus::NoStableModel) continue;
-      models.push(make_step(req.climb ? "diagnose --auto" : "diagnose", s.fit, s.residual));
-      ++added;
+      auto step = make_step(req.climb ? "diagnose --auto" : "diagnose", s.fit, s.residual);
+      entries.push_back(step->entry);
+      models.push(std::move(step));
     }
+    const json history = record_history(models, entries);
     json j = diagnosis_json(*r, d.t, VerdictText{});
     j.erase("verdict");  // the loop's verdict is /verdict's (loop_verdict), not this analysis'
     j.erase("unusable_reason");
@@ -192,8 +206,9 @@ json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const
     return {{"model", j["model"]},
             {"findings", j["findings"]},
             {"conclusion", j["conclusion"]},
-            {"steps_added", added},
-            {"ladder_steps", models.steps().size()}};
+            {"steps_added", entries.size()},
+            {"ladder_steps", models.steps().size()},
+            {"history", history}};
   }
   ModelSpec spec = base;
   std::vector<EffectSpec> replaced;
@@ -219,9 +234,12 @@ json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const
   throw_if_cancelled(control.cancel_flag());  // a cancelled job leaves the ladder as it was
   const std::string action =
       req.action == "fit" ? "fit " + to_string(spec) : req.action + " " + req.effect;
-  models.push(make_step(action, std::move(f), std::move(where)));
+  auto step = make_step(action, std::move(f), std::move(where));
+  const HistoryEntry entry = step->entry;
+  models.push(std::move(step));
   const auto steps = models.steps();
   json j = step_summary(steps.size() - 1, *steps.back());
+  j["history"] = record_history(models, {entry});
   j["replaced"] = json::array();
   for (const auto& e : replaced) j["replaced"].push_back(to_string(e));
   control.report(1.0, "done");

@@ -134,7 +134,7 @@ WorkbenchApi::WorkbenchApi(std::vector<ServedLoop> loops, VerdictFunction verdic
       jobs_(limits) {
   for (std::size_t i = 0; i < loops_.size(); ++i) {
     cache_.push_back(std::make_unique<Cached>());
-    models_.push_back(std::make_unique<LoopModels>());
+    models_.push_back(std::make_unique<LoopModels>(loops_[i].history));
   }
 }
 

@@ -37,13 +37,14 @@ struct ServeProcess {
   int port = 0;
   std::string token;
   // args: the command and its options ({"serve", "loop.csv", "--port", "0"}); limit_s: how long
-  // it may take to print its address.
+  // it may take to print its address; env: changes to its environment, as for spawn().
   ServeProcess(const std::string& bin, const std::vector<std::string>& args,
-               const std::filesystem::path& tmp, const std::string& tag, double limit_s = 30.0) {
+               const std::filesystem::path& tmp, const std::string& tag, double limit_s = 30.0,
+               const std::vector<std::string>& env = {}) {
     out = tmp / ("serve_" + std::to_string(::getpid()) + "_" + tag + ".txt");
     std::vector<std::string> full{bin};
     full.insert(full.end(), args.begin(), args.end());
-    pid = spawn(full, out);
+    pid = spawn(full, out, env);
     // Its first lines: the address with the port it picked, then the token. (No std::regex:
     // GCC 12 warns inside it under the sanitizers' -O1, and warnings are errors.)
     const std::string addr = "http://127.0.0.1:", tok = "token: ";

@@ -2,8 +2,10 @@
 // cpp-httplib's client. Every wait is bounded; a server left running is killed.
 #include <doctest/doctest.h>
 #include <signal.h>
+#include <unistd.h>
 
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -28,8 +30,9 @@ const fs::path kTmp = VALVEDIAG_TMP;
 using valvediag::test::slurp;
 
 struct Server : valvediag::test::ServeProcess {
-  Server(const std::vector<std::string>& args, const std::string& tag)
-      : ServeProcess(VALVEDIAG_BIN, with_serve(args), kTmp, tag) {}
+  Server(const std::vector<std::string>& args, const std::string& tag,
+         const std::vector<std::string>& env = {})
+      : ServeProcess(VALVEDIAG_BIN, with_serve(args), kTmp, tag, 30.0, env) {}
   static std::vector<std::string> with_serve(std::vector<std::string> args) {
     args.insert(args.begin(), "serve");
     return args;
@@ -272,6 +275,62 @@ TEST_CASE("serve over HTTP: the page, a job, bad bodies, a client that hangs up"
   }
   CHECK(body(c.Get("/api/loops", auth))["loops"].size() == 1);
   CHECK(s.stop() == 0);
+}
+
+// Posts a job and waits (bounded) for its end; its status.
+json run_job(httplib::Client& c, const std::string& body_text) {
+  const auto posted = c.Post("/api/loops/0/jobs", body_text, "application/json");
+  REQUIRE(posted);
+  REQUIRE(posted->status == 202);
+  const std::string job = json::parse(posted->body)["job"];
+  json st;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(300);
+  do {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    st = body(c.Get("/api/jobs/" + job));
+  } while ((st["state"] == "queued" || st["state"] == "running") &&
+           std::chrono::steady_clock::now() < end);
+  return st;
+}
+
+TEST_CASE("serve adds its models to the file's history in the state directory: ladder lists them") {
+  const fs::path csv = loop_csv();
+  const fs::path state = kTmp / ("serve_history_state_" + std::to_string(::getpid()));
+  fs::remove_all(state);
+  const std::vector<std::string> env{"XDG_STATE_HOME=" + state.string()};
+  {
+    Server s({csv.string(), "--port", "0"}, "history", env);
+    REQUIRE(s.port > 0);
+    CHECK(slurp(s.out).find("model history of " + csv.string() + ": " + state.string()) !=
+          std::string::npos);
+    auto c = s.client();
+    const json a = run_job(c, R"({"action":"fit","model":"linear"})");
+    REQUIRE(a["state"] == "done");
+    CHECK(a["result"]["history"]["entries"] == 1);
+    const json b = run_job(c, R"({"action":"add","effect":"stiction"})");
+    REQUIRE(b["state"] == "done");
+    CHECK(b["result"]["history"]["entries"] == 2);
+    CHECK(s.stop() == 0);
+  }
+  // The CLI's ladder finds them by the data's content and reading options, as fit's and
+  // diagnose's.
+  const auto lad = run_cli(VALVEDIAG_BIN, {"ladder", csv.string()}, kTmp, 60.0, env);
+  CHECK_MESSAGE(lad.status == 0, lad.out);
+  CHECK(lad.out.find("\n1     linear ") != std::string::npos);
+  CHECK(lad.out.find("\n2     stiction ") != std::string::npos);
+
+  // --no-history writes nothing.
+  fs::remove_all(state);
+  {
+    Server s({csv.string(), "--port", "0", "--no-history"}, "no_history", env);
+    REQUIRE(s.port > 0);
+    auto c = s.client();
+    const json a = run_job(c, R"({"action":"fit","model":"linear"})");
+    REQUIRE(a["state"] == "done");
+    CHECK(a["result"]["history"].is_null());
+    CHECK(s.stop() == 0);
+  }
+  CHECK(!fs::exists(state));
 }
 
 // The demo's recording in the workbench: the offline demo (simulated, fitted, reported) then the

@@ -3,17 +3,21 @@
 // stiction, adding it raises the validation fitness), the ladder, model and simulation
 // downloads, the report, bad bodies, and the embedded page with its content types and token.
 #include <doctest/doctest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <thread>
 
 #include "../common/sanitized.hpp"
 #include "api_checks.hpp"
 #include "valvediag/core/identification.hpp"
 #include "valvediag/model/model_fit.hpp"
+#include "valvediag/report/model_history.hpp"
 #include "valvediag/serve/workbench_api.hpp"
 #include "valvediag/sim/scenarios.hpp"
 
@@ -352,6 +356,51 @@ TEST_CASE(
   double hi = -1e9;
   for (const auto& x : j["x"]) hi = std::max(hi, x.get<double>());
   CHECK(hi == *std::max_element(s.fit.x_hat.begin(), s.fit.x_hat.end()));
+}
+
+TEST_CASE("jobs: each model added to the ladder is appended to the loop's history file") {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(VALVEDIAG_TMP) / ("jobs_history_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const std::string file = (dir / "history" / "loop.json").string();
+  LoopModels models(file);
+  JobControl control;
+  const json fit = run_job(parse_job_request({{"action", "fit"}, {"model", "linear"}}),
+                           sticky_loop(), models, {}, control);
+  CHECK(fit["history"]["entries"] == 1);
+  const json dg =
+      run_job(parse_job_request({{"action", "diagnose"}}), sticky_loop(), models, {}, control);
+  CHECK(dg["steps_added"] == 0);  // the model diagnosed is the ladder's last: no new step
+  CHECK(dg["history"].is_null());
+  const json band = run_job(parse_job_request({{"action", "fit"}, {"model", "deadband"}}),
+                            sticky_loop(), models, {}, control);
+  CHECK(band["history"]["entries"] == 2);
+  // The file holds the ladder's rows, as `valvediag ladder` reads them.
+  const auto h = load_history(file);
+  const auto steps = models.steps();
+  REQUIRE(h.size() == 2);
+  REQUIRE(steps.size() == 2);
+  for (std::size_t k = 0; k < 2; ++k) {
+    CHECK(h[k].model == steps[k]->entry.model);
+    CHECK(h[k].command == steps[k]->entry.command);
+    CHECK(h[k].fitness_percent == doctest::Approx(steps[k]->fit.fitness_percent));
+    CHECK(h[k].validation_fitness_percent ==
+          doctest::Approx(steps[k]->fit.validation_fitness_percent));
+  }
+  CHECK(h[0].command == "workbench fit linear");
+  CHECK(h[1].model == "deadband");
+  // Without a file nothing is written; a file that cannot be written leaves the model standing.
+  LoopModels none;
+  CHECK(run_job(parse_job_request({{"action", "fit"}, {"model", "linear"}}), sticky_loop(), none,
+                {}, control)["history"]
+            .is_null());
+  std::ofstream(dir / "a-file") << "not a folder";
+  LoopModels blocked((dir / "a-file" / "history.json").string());
+  const json b = run_job(parse_job_request({{"action", "fit"}, {"model", "linear"}}), sticky_loop(),
+                         blocked, {}, control);
+  CHECK(!b["history"]["error"].get<std::string>().empty());
+  CHECK(blocked.steps().size() == 1);
+  fs::remove_all(dir);
 }
 
 TEST_CASE("jobs: a full ladder refuses more models") {

@@ -1,5 +1,6 @@
-// The workbench's models of one loop: the ladder built in this session (each fit, kept in memory
-// only), the latest diagnosis and the job requests that grow them. The work calls the functions
+// The workbench's models of one loop: the ladder built in this session (each fit kept in memory,
+// its row appended to the loop's model history file when it has one), the latest diagnosis and
+// the job requests that grow them. The work calls the functions
 // the CLI calls: fit_model (fit --model), add_effect/remove_effect (fit --add/--remove),
 // diagnose/diagnose_auto (diagnose), history_entry (the numbers `ladder` prints), model_fit_json
 // (fit --json) and html_report (report).
@@ -58,6 +59,11 @@ JobRequest parse_job_request(const nlohmann::json& body);
 
 class LoopModels {
  public:
+  // history_file: the loop's model history (model_history.hpp), to which each model the jobs add
+  // to the ladder is appended, as fit and diagnose append theirs, so that `valvediag ladder`
+  // lists them; "" writes none.
+  explicit LoopModels(std::string history_file = "") : history_file_(std::move(history_file)) {}
+  const std::string& history_file() const { return history_file_; }
   std::vector<std::shared_ptr<const ModelStep>> steps() const;
   std::shared_ptr<const ModelStep> step(std::size_t n) const;  // nullptr: no such step
   std::shared_ptr<const ModelStep> last() const;               // nullptr: none yet
@@ -70,14 +76,18 @@ class LoopModels {
   void set_diagnosis(Diagnosed d);
 
  private:
+  const std::string history_file_;
   mutable std::mutex m_;
   std::vector<std::shared_ptr<const ModelStep>> steps_;
   std::optional<Diagnosed> diagnosis_;
 };
 
-// Runs a request on the loop `d` (the part diagnose analyses), grows `models` and returns the
-// job's result. Checks `control` for cancellation; throws Cancelled, or std::invalid_argument when
-// the model cannot be fitted or the ladder is full (max_steps models).
+// Runs a request on the loop `d` (the part diagnose analyses), grows `models`, appends the new
+// models to its history file when it has one, and returns the job's result (with "history":
+// {"entries": N in the file}, or {"error": why} when the file could not be written: the models
+// stand without it; null without a history file or a new model). Checks `control` for
+// cancellation; throws Cancelled, or std::invalid_argument when the model cannot be fitted or the
+// ladder is full (max_steps models).
 nlohmann::json run_job(const JobRequest& req, const LoopData& d, LoopModels& models,
                        const ModelOptions& opt, JobControl& control,
                        std::size_t max_steps = kMaxLadderSteps);

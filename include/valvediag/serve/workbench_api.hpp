@@ -6,7 +6,7 @@
 //
 // Safety: the API serves only the loops it was given. No endpoint takes a file name, paths are
 // matched segment by segment against the few routes below (anything else, `..` included, is a
-// 404), and nothing here writes a file.
+// 404), and the only files written are the loops' model histories (ServedLoop::history).
 #pragma once
 
 #include <functional>
@@ -25,14 +25,18 @@
 namespace valvediag::serve {
 
 struct ServedLoop {
-  ServedLoop(std::string n, LoopData d, std::optional<LoopData> a = std::nullopt)
-      : name(std::move(n)), data(std::move(d)), analysed(std::move(a)) {}
+  ServedLoop(std::string n, LoopData d, std::optional<LoopData> a = std::nullopt,
+             std::string h = "")
+      : name(std::move(n)), data(std::move(d)), analysed(std::move(a)), history(std::move(h)) {}
   std::string name;  // the loop's tag, else the file's stem
   LoopData data;
   // The part the models are fitted to: diagnose's (the CLI leaves a quiet lead-in out, as
   // diagnose does); nullopt: all of `data`.
   std::optional<LoopData> analysed;
   const LoopData& model_data() const { return analysed ? *analysed : data; }
+  // The loop's model history file, where the jobs' models are appended (the CLI: the state
+  // directory's file for the data and its reading options, the one `ladder` reads); "": none.
+  std::string history;
 };
 
 // One request as the HTTP layer parsed it: the path already URL-decoded, the query's parameters
