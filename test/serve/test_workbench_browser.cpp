@@ -332,6 +332,12 @@ TEST_CASE(
       "return n >= 201 ? n : null;",
       60.0, "the zoomed window's samples");
   CHECK(inside == 201);
+  // The phase plots follow the window: PV against OP through its 201 samples, all estimation.
+  const json phase = d.wait_for(
+      "const p = wb.xy.phase;"
+      "return p && p.series.length === 1 && p.points === 201 ? p.series[0].label : null;",
+      60.0, "PV against OP of the zoomed window");
+  CHECK(phase == "estimation part");
   const json dw = d.script("return wb.charts.trend.xAxisRange();");
   CHECK(dw[0] == 200);
   CHECK(dw[1] == 300);
