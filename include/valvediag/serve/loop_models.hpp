@@ -1,9 +1,9 @@
 // The workbench's models of one loop: the ladder built in this session (each fit kept in memory,
 // its row appended to the loop's model history file when it has one), the latest diagnosis and
-// the job requests that grow them. The work calls the functions
-// the CLI calls: fit_model (fit --model), add_effect/remove_effect (fit --add/--remove),
-// diagnose/diagnose_auto (diagnose), history_entry (the numbers `ladder` prints), model_fit_json
-// (fit --json) and html_report (report).
+// the job requests that grow them. The work calls the functions the CLI calls: fit_model (fit
+// --model), add_effect/remove_effect (fit --add/--remove), diagnose/diagnose_auto (diagnose),
+// history_entry (the numbers `ladder` prints), model_fit_json (fit --json) and html_report
+// (report).
 #pragma once
 
 #include <memory>
