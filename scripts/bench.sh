@@ -79,7 +79,7 @@ target() {
 }
 $v simulate --scenario paper-ex1 --seed 1 --samples 25000 --out "$work/fit25k.csv" >/dev/null
 $v simulate --scenario paper-ex1 --seed 1 --samples 4000 --out "$work/auto4k.csv" >/dev/null
-target "fit, 25,000 samples" 3 $v fit "$work/fit25k.csv"
+target "fit, 25,000 samples" 3 $v fit "$work/fit25k.csv" --no-history
 target "diagnose --auto, 4,000 samples" 4 $v diagnose "$work/auto4k.csv" --auto --no-history
 shared=${VALVEDIAG_SHARED_DIR:-../shared}
 plant="$shared/data/plant-loops"
