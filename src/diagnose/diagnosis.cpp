@@ -396,10 +396,27 @@ void order_path_by_prediction(std::vector<Finding>& findings, bool lags_commute)
   if (lag != findings.end() && order != findings.end() && lag < order) std::iter_swap(lag, order);
 }
 
+// A part [lo, hi] of DiagnoseOptions::progress, its phases prefixed (a climb's step).
+struct Progress {
+  const DiagnoseOptions* opt = nullptr;  // null: silent
+  double lo = 0.0, hi = 1.0;
+  std::string prefix;
+  Progress() = default;
+  explicit Progress(const DiagnoseOptions* o, double from = 0.0, double to = 1.0,
+                    std::string before = "")
+      : opt(o), lo(from), hi(to), prefix(std::move(before)) {}
+  void operator()(double fraction, const std::string& phase) const {
+    if (opt && opt->progress)
+      opt->progress(lo + (hi - lo) * std::clamp(fraction, 0.0, 1.0), prefix + phase);
+  }
+};
+
 DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& y, double Ts,
-                       const ModelSpec& model, const DiagnoseOptions& opt) {
+                       const ModelSpec& model, const DiagnoseOptions& opt,
+                       const Progress& progress = {}) {
   const ModelFitOptions fo = fit_options(opt);
   DiagnosisStep step;
+  progress(0.0, "fitting " + to_string(model));
   step.fit = fit_model(u, y, Ts, model, fo);
   ResidualAnalysisOptions ro;
   ro.model_delay = static_cast<std::size_t>(std::max(0, step.fit.structure.nk + 1));
@@ -456,7 +473,14 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   if (!model.has("integrator")) to.integrating_horizon = 0;
   if (model.has("delay") && fo.delay_nk_max <= 0 && step.fit.structure.nk >= 0)
     to.delay_nk_max = 2 * step.fit.structure.nk + fo.structure.nk_max;
-  auto fits = fit_models(u, y, Ts, trials, to);
+  const auto trial_phase = [&trials](std::size_t done) {
+    return strprintf("trial models: %zu of %zu fitted", done, trials.size());
+  };
+  progress(0.15, trial_phase(0));
+  auto fits = fit_models(u, y, Ts, trials, to, [&](std::size_t done) {
+    progress(0.15 + 0.6 * static_cast<double>(done) / static_cast<double>(trials.size()),
+             trial_phase(done));
+  });
   // The variants that lose on simulated output stay candidates of the prediction refit below.
   std::vector<std::pair<std::size_t, ModelFit>> other_variants;
   for (std::size_t j = 0; j < variant_of.size(); ++j) {
@@ -595,6 +619,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   for (std::size_t i = 0; i < fits.size(); ++i) jobs.emplace_back(i, &fits[i]);
   for (const auto& [i, alt] : other_variants) jobs.emplace_back(i, &alt);
   std::vector<PredictionRefit> refits(fits.size()), job_refits(jobs.size());
+  progress(0.8, "predicting PV one step ahead (the valve effects refitted to it)");
   if (pe_model.ok) {
     parallel_for(jobs.size(), worker_count(fo.threads, jobs.size()), [&](unsigned, std::size_t j) {
       const auto [i, f] = jobs[j];
@@ -891,6 +916,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   };
   // The rule is not transitive (a cycle: stiction over characteristic by gain, characteristic
   // over a load by parameter count, the load over stiction by score): a sort would be undefined.
+  progress(0.95, "ranking the findings");
   rank_by_wins(step.findings, ranks_above);
   order_path_by_prediction(step.findings, lags_commute);
   // Two effects that the data cannot tell apart: say so rather than pretend. They are when their
@@ -1085,9 +1111,11 @@ std::string held_valve_note(const Finding& f) {
 Diagnosis diagnose(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                    const ModelSpec& model, const DiagnoseOptions& opt) {
   Diagnosis d;
-  d.steps.push_back(evaluate(u, y, Ts, model, opt));
+  d.steps.push_back(evaluate(u, y, Ts, model, opt, Progress(&opt, 0.0, 0.85)));
   const auto& f = d.last().findings;
   const bool supported = !f.empty() && f.front().supported;
+  const Progress progress(&opt);
+  progress(0.85, "limit-cycle and whole-record tests");
   d.limit_cycle = limit_cycle_of(u, y, Ts, d);
   d.whole_record = whole_record_of(u, y, Ts, d, opt);
   d.conclusion = with_lag_note(
@@ -1108,8 +1136,14 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
   Diagnosis d;
   ModelSpec model = start;
   std::string why, joint, restart;
+  // Each step a share of the climb's most steps (one more: a restart from `integrator`).
+  const double share = 0.85 / (std::max(opt.max_steps, 0) + 2);
   for (int k = 0;; ++k) {
-    d.steps.push_back(evaluate(u, y, Ts, model, opt));
+    const double lo = std::min(0.85 - share, share * k);
+    d.steps.push_back(
+        evaluate(u, y, Ts, model, opt,
+                 Progress{&opt, lo, lo + share,
+                          strprintf("step %d (%s): ", k + 1, to_string(model).c_str())}));
     const auto& f = d.last().findings;
     if (k >= opt.max_steps) {
       why = strprintf("Stopped after %.0f added effects.", static_cast<double>(k));
@@ -1166,6 +1200,7 @@ Diagnosis diagnose_auto(const std::vector<double>& u, const std::vector<double>&
     }
     model = best.trial_spec;
   }
+  Progress{&opt}(0.85, "limit-cycle and whole-record tests");
   d.limit_cycle = limit_cycle_of(u, y, Ts, d);
   d.whole_record = whole_record_of(u, y, Ts, d, opt);
   d.conclusion = with_lag_note(
@@ -1186,7 +1221,10 @@ Diagnosis with_valve_travel(Diagnosis d, const std::vector<double>& u,
                             const std::vector<double>& mv, double Ts, const DiagnoseOptions& opt) {
   ValveTravelOptions vt = opt.valve_travel;
   if (vt.threads == 0) vt.threads = opt.fit.threads;
-  if (!mv.empty()) d.valve_travel = check_valve_travel(u, mv, Ts, vt);
+  if (!mv.empty()) {
+    Progress{&opt}(0.95, "valve-travel test");
+    d.valve_travel = check_valve_travel(u, mv, Ts, vt);
+  }
   return d;
 }
 

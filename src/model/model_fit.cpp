@@ -1097,12 +1097,19 @@ std::vector<double> simulate_model(const ModelFit& fit, const std::vector<double
 
 std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector<double>& y,
                                  double Ts, const std::vector<ModelSpec>& specs,
-                                 const ModelFitOptions& opt) {
+                                 const ModelFitOptions& opt,
+                                 const std::function<void(std::size_t)>& each_done) {
   std::vector<ModelFit> out(specs.size());
   ModelFitOptions one = opt;
   one.threads = 1;  // the parallelism is across the specs
-  parallel_for(specs.size(), worker_count(opt.threads, specs.size()),
-               [&](unsigned, std::size_t k) { out[k] = fit_model(u, y, Ts, specs[k], one); });
+  std::mutex reporting;
+  std::size_t done = 0;
+  parallel_for(specs.size(), worker_count(opt.threads, specs.size()), [&](unsigned, std::size_t k) {
+    out[k] = fit_model(u, y, Ts, specs[k], one);
+    if (!each_done) return;
+    const std::lock_guard<std::mutex> lock(reporting);
+    each_done(++done);
+  });
   return out;
 }
 

@@ -181,8 +181,12 @@ json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const
     check_identifiable_data(d, 200, "a diagnosis");
     DiagnoseOptions o = opt.diagnose_options(d);
     o.fit.cancel = control.cancel_flag();
-    control.report(0.05, (req.climb ? "climbing the ladder from " : "diagnosing ") +
-                             to_string(base) + ": trial fits of the missing effects");
+    const std::string what =
+        (req.climb ? "climbing the ladder from " : "diagnosing ") + to_string(base) + ": ";
+    control.report(0.05, what + "trial fits of the missing effects");
+    o.progress = [&control, &what](double fraction, const std::string& phase) {
+      control.report(0.05 + 0.9 * fraction, what + phase);
+    };
     auto r = std::make_shared<Diagnosis>(req.climb ? diagnose_auto(d.op, d.pv, d.mv, Ts, base, o)
                                                    : diagnose(d.op, d.pv, d.mv, Ts, base, o));
     throw_if_cancelled(control.cancel_flag());

@@ -379,10 +379,33 @@ TEST_CASE("the conclusion's interval times count from time_origin_s") {
 
 TEST_CASE("--auto climbs to the hidden effect and stops" * valvediag::test::release_only()) {
   const LoopData data = run_scenario(scenario_by_name("paper-ex1"), 1, 0);
+  std::vector<std::pair<double, std::string>> progress;  // one call at a time (the options say)
+  DiagnoseOptions o;
+  o.progress = [&progress](double f, const std::string& phase) { progress.emplace_back(f, phase); };
   const Diagnosis d =
-      diagnose_auto(data.op, data.pv, data.sample_period(), parse_model_spec("linear"));
+      diagnose_auto(data.op, data.pv, data.sample_period(), parse_model_spec("linear"), o);
   REQUIRE(d.steps.size() >= 2);
   CHECK(to_string(d.steps[1].fit.spec) == "stiction");
+  // The progress rises from the first step's model fit to the final tests, and counts each
+  // step's trial fits.
+  REQUIRE(progress.size() >= 4);
+  CHECK(progress.front().first == doctest::Approx(0.0));
+  CHECK(progress.front().second == "step 1 (linear): fitting linear");
+  CHECK(progress.back().second == "limit-cycle and whole-record tests");
+  for (std::size_t i = 1; i < progress.size(); ++i) {
+    INFO(progress[i].second);
+    CHECK(progress[i].first >= progress[i - 1].first);
+    CHECK(progress[i].first <= 1.0);
+  }
+  for (std::size_t k = 0; k < d.steps.size(); ++k) {
+    const std::string step = "step " + std::to_string(k + 1) + " (" +
+                             to_string(d.steps[k].fit.spec) + "): trial models: ";
+    const auto trials = std::count_if(progress.begin(), progress.end(), [&](const auto& p) {
+      return p.second.rfind(step, 0) == 0 && p.second.find(" fitted") != std::string::npos;
+    });
+    INFO(step);
+    CHECK(trials >= static_cast<long>(d.steps[k].findings.size()) + 1);  // 0 of N, then each
+  }
   CHECK(d.steps.size() <= 3);
   CHECK(d.steps.back().fit.validation_fitness_percent > 85.0);
   CHECK(d.conclusion.find("What is left") != std::string::npos);

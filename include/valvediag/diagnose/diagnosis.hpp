@@ -8,6 +8,7 @@
 // effect.
 #pragma once
 
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -75,6 +76,10 @@ struct DiagnoseOptions {
   // The valve-travel test, run when the valve position is given: its OP span (op_range)
   // turns friction into % of travel, so set it to the valve's OP range when OP is not 0..100.
   ValveTravelOptions valve_travel;
+  // Called as the diagnosis goes: how far it got (0..1, rising) and what it is doing, e.g.
+  // "step 2, trial models: 5 of 9 fitted". From the diagnosing thread and the fit workers, one
+  // call at a time. (The workbench's job progress.)
+  std::function<void(double fraction, const std::string& phase)> progress;
   // Time of the first sample, s: the conclusion names intervals at time_origin_s + k Ts (the
   // data's own time when a record was cut after a quiet lead-in, or its time axis starts late).
   double time_origin_s = 0.0;

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstddef>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
@@ -119,10 +120,12 @@ struct ModelFit {
 // (lengths differ, too few samples, non-finite samples, constant OP, Ts <= 0, bad options).
 ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, double Ts,
                    const ModelSpec& spec, const ModelFitOptions& opt = {});
-// Independent fits of several specs on the same data, shared out over the cores.
+// Independent fits of several specs on the same data, shared out over the cores. each_done, when
+// given, is called after each fit with how many are done (one call at a time, counts rising).
 std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector<double>& y,
                                  double Ts, const std::vector<ModelSpec>& specs,
-                                 const ModelFitOptions& opt = {});
+                                 const ModelFitOptions& opt = {},
+                                 const std::function<void(std::size_t)>& each_done = {});
 
 // The fitted model driven by another record of the same loop (validation on separate data, as in
 // the paper's Example 4): the valve from rest at u[0] (Preisach: the fitted initial memory), the
