@@ -505,19 +505,29 @@ json decimated_series(const LoopData& d, double from, double to, int buckets) {
   return decimated_columns(d.t, cols, from, to, buckets);
 }
 
-json decimated_columns(const std::vector<double>& tt, const std::vector<Column>& columns,
-                       double from, double to, int buckets) {
+namespace {
+
+// The samples [first, first + count) of time axis tt within [from, to] s; none: a bad request
+// naming what the axis (`what`) spans.
+std::pair<std::size_t, std::size_t> window_of(const std::vector<double>& tt, double from, double to,
+                                              const char* what) {
   const auto b = std::lower_bound(tt.begin(), tt.end(), from);
   const auto e = std::upper_bound(tt.begin(), tt.end(), to);
   if (b >= e)
     throw BadRequest("no sample between from=" + std::to_string(from) +
-                     " and to=" + std::to_string(to) + " s (the record spans " +
+                     " and to=" + std::to_string(to) + " s (" + what + " spans " +
                      (tt.empty()
                           ? std::string("nothing")
                           : std::to_string(tt.front()) + " to " + std::to_string(tt.back())) +
                      " s)");
-  const std::size_t i0 = static_cast<std::size_t>(b - tt.begin());
-  const std::size_t m = static_cast<std::size_t>(e - b);
+  return {static_cast<std::size_t>(b - tt.begin()), static_cast<std::size_t>(e - b)};
+}
+
+}  // namespace
+
+json decimated_columns(const std::vector<double>& tt, const std::vector<Column>& columns,
+                       double from, double to, int buckets) {
+  const auto [i0, m] = window_of(tt, from, to, "the record");
   const std::size_t nb = std::min<std::size_t>(static_cast<std::size_t>(std::max(buckets, 1)), m);
   struct Signal {
     Column c;
@@ -551,17 +561,7 @@ json decimated_columns(const std::vector<double>& tt, const std::vector<Column>&
 
 json decimated_path(const std::vector<double>& tt, const std::vector<Column>& columns, double from,
                     double to, int points, std::size_t held_out_from) {
-  const auto b = std::lower_bound(tt.begin(), tt.end(), from);
-  const auto e = std::upper_bound(tt.begin(), tt.end(), to);
-  if (b >= e)
-    throw BadRequest("no sample between from=" + std::to_string(from) +
-                     " and to=" + std::to_string(to) + " s (the part plotted spans " +
-                     (tt.empty()
-                          ? std::string("nothing")
-                          : std::to_string(tt.front()) + " to " + std::to_string(tt.back())) +
-                     " s)");
-  const std::size_t i0 = static_cast<std::size_t>(b - tt.begin());
-  const std::size_t m = static_cast<std::size_t>(e - b);
+  const auto [i0, m] = window_of(tt, from, to, "the part plotted");
   const std::size_t budget = static_cast<std::size_t>(std::max(points, 1));
   const auto value = [](const Column& c, std::size_t i) {
     return i < c.x->size() ? (*c.x)[i] : NAN;
