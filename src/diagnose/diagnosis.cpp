@@ -512,6 +512,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   const double base_val = finite_or(step.fit.validation_fitness_percent, 0.0);
   const double base_est = finite_or(step.fit.fitness_percent, 0.0);
   double base_score = base_est;  // what the model leaves, as the findings' gains are measured
+  KStepFitness model_k;          // the model's k-step fitness, when a k-step judge is set
   // An integrating model: every fit of the step judged on k-step-ahead prediction (KStepJudge).
   if (step.fit.integrating && step.fit.y_sim.size() == y.size()) {
     KStepJudge j;
@@ -524,12 +525,13 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
                                                  : std::max<std::size_t>(30, span / 16);
     j.horizon = output_horizon(y, first, j.estimation_end);
     j.from = first + j.interval;
-    const KStepFitness m = k_step_fitness(step.fit, y, j);
+    KStepFitness m = k_step_fitness(step.fit, y, j);
     if (std::isfinite(m.estimation)) {
       j.model_fitness_percent = m.estimation;
       j.model_validation_fitness_percent = m.validation;
       step.judge = j;
       base_score = m.estimation;
+      model_k = std::move(m);
     }
   }
   // Each trial's k-step fitness, once: the refit test below and the gains measure it.
@@ -639,14 +641,20 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     }
   }
   std::vector<PredictionError> predictions(fits.size());
-  const JudgedFit judged_model = judged(step.fit, y, step.judge);
+  // What the gains below are measured against: the model's judged output and fitnesses, or
+  // those of its refit from a later-starting trial's first sample (same_samples), each once.
+  const JudgedFit judged_model =
+      step.judge.horizon > 0
+          ? JudgedFit{std::move(model_k.output), model_k.estimation, model_k.validation,
+                      step.judge.from + step.judge.horizon, step.judge.estimation_end}
+          : judged(step.fit, y, step.judge);
+  std::map<const ModelFit*, JudgedFit> judged_refits;
+  for (const ModelFit* r : same_samples)
+    if (r && !judged_refits.count(r)) judged_refits.emplace(r, judged(*r, y, step.judge));
   for (std::size_t i = 0; i < fits.size(); ++i) {
     const ModelFit& t = fits[i];
     Finding f;
-    // What the gains below are measured against: the model's judged output and samples.
-    JudgedFit reference;
-    if (same_samples[i]) reference = judged(*same_samples[i], y, step.judge);
-    const JudgedFit& ref = same_samples[i] ? reference : judged_model;
+    const JudgedFit& ref = same_samples[i] ? judged_refits.at(same_samples[i]) : judged_model;
     const std::size_t ref_from =
         step.judge.horizon > 0 ? ref.from : std::max(ref.from, t.first_sample);
     if (pe_model.ok) {
@@ -674,7 +682,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     if (step.judge.horizon == 0 && same_samples[i]) {
       // Against the model fitted on the same samples: the fitness of both over the same part.
       f.estimation_gain_percent =
-          finite_or(t.fitness_percent, -1e9) - finite_or(same_samples[i]->fitness_percent, -1e9);
+          finite_or(t.fitness_percent, -1e9) - finite_or(ref.estimation, -1e9);
     } else if (step.judge.horizon == 0 && t.first_sample != step.fit.first_sample &&
                t.y_sim.size() == y.size() && step.fit.y_sim.size() == y.size() &&
                t.estimation_end == step.fit.estimation_end) {
@@ -684,20 +692,15 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
             finite_or(fitness_percent(y, t.y_sim, from, t.estimation_end), -1e9) -
             finite_or(fitness_percent(y, step.fit.y_sim, from, t.estimation_end), -1e9);
     }
-    f.validation_gain_percent =
-        finite_or(t.validation_fitness_percent, -1e9) -
-        (same_samples[i] ? finite_or(same_samples[i]->validation_fitness_percent, -1e9) : base_val);
+    f.validation_gain_percent = finite_or(t.validation_fitness_percent, -1e9) -
+                                (same_samples[i] ? finite_or(ref.validation, -1e9) : base_val);
     for (const auto& e : t.effects)
       if (e.name == f.effect) f.parameters = e.parameters;
     if (step.judge.horizon > 0) {
       const KStepFitness& k = trial_k[i];
-      KStepFitness m;
-      m.estimation = step.judge.model_fitness_percent;
-      m.validation = step.judge.model_validation_fitness_percent;
-      if (same_samples[i]) m = k_step_fitness(*same_samples[i], y, step.judge);
-      f.estimation_gain_percent = finite_or(k.estimation, -1e9) - finite_or(m.estimation, -1e9);
-      if (std::isfinite(m.validation))
-        f.validation_gain_percent = finite_or(k.validation, -1e9) - m.validation;
+      f.estimation_gain_percent = finite_or(k.estimation, -1e9) - finite_or(ref.estimation, -1e9);
+      if (std::isfinite(ref.validation))
+        f.validation_gain_percent = finite_or(k.validation, -1e9) - ref.validation;
     }
     f.parameter_count = effect_parameter_count(names[i], t, Ts);
     if (ref.output.size() == y.size() && ref.estimation_end < y.size() &&

@@ -684,6 +684,15 @@ std::pair<std::vector<double>, std::vector<double>> open_loop_record(
   return {op, pv};
 }
 
+// The one step of a diagnosis of a linear model with `delay` its only candidate (Ts 1 s).
+DiagnosisStep delay_only_step(const std::vector<double>& op, const std::vector<double>& pv) {
+  DiagnoseOptions o;
+  o.candidates = {"delay"};
+  const Diagnosis dg = diagnose(op, pv, 1.0, parse_model_spec("linear"), o);
+  REQUIRE(dg.last().findings.size() == 1);
+  return dg.last();
+}
+
 // A trial whose structure reaches further back (a `delay`, searched up to an eighth of the
 // estimation part) starts its simulation later than the model. Its estimation gain is measured
 // over the samples both simulate: a start the model fails on (here a burst of measurement noise
@@ -693,11 +702,7 @@ TEST_CASE("a trial that starts later gains only over the samples both fits simul
   // measurement noise, and a burst of larger noise over samples 20-220.
   const auto [op, pv] = open_loop_record(
       5, [](std::size_t t, double n) { return n * (t >= 20 && t < 220 ? 20.0 : 1.0); });
-  DiagnoseOptions o;
-  o.candidates = {"delay"};
-  const Diagnosis dg = diagnose(op, pv, 1.0, parse_model_spec("linear"), o);
-  const DiagnosisStep& s = dg.last();
-  REQUIRE(s.findings.size() == 1);
+  const DiagnosisStep s = delay_only_step(op, pv);
   const Finding& f = s.findings[0];
   // The setup: each fitness over its own samples would credit the trial with the burst.
   CHECK(f.trial_fitness_percent - s.fit.fitness_percent > 5.0);
@@ -715,11 +720,7 @@ TEST_CASE("a trial that starts later is measured against the model fitted on its
   // 40-240, inside the eighth of the record a dead-time trial skips.
   const auto [op, pv] = open_loop_record(
       7, [](std::size_t t, double n) { return n + (t >= 40 && t < 240 ? 15.0 : 0.0); });
-  DiagnoseOptions o;
-  o.candidates = {"delay"};
-  const Diagnosis dg = diagnose(op, pv, 1.0, parse_model_spec("linear"), o);
-  const DiagnosisStep& s = dg.last();
-  REQUIRE(s.findings.size() == 1);
+  const DiagnosisStep s = delay_only_step(op, pv);
   const Finding& f = s.findings[0];
   // The setup: the model fitted over the load loses held out what the trial keeps.
   CHECK(f.trial_validation_fitness_percent - s.fit.validation_fitness_percent > 5.0);
