@@ -95,11 +95,13 @@ std::size_t validation_start(LoopData& d, const std::string& spec, FitOptions& f
 int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const HistoryPlace& history,
              const LoopVerdict* lv) {
   ModelSpec spec = parse_model_spec("linear");
+  std::optional<ModelSpec> last;  // the history's last model, which --add extends
   if (!a.model.empty()) {
     spec = parse_model_spec(a.model);
   } else {
     const auto h = load_history_at(history);
     if (!h.empty()) spec = parse_model_spec(h.back().model);
+    if (!h.empty()) last = spec;
     std::cout << "note: starting from the last model of this data: " << to_string(spec)
               << (h.empty() ? " (no history yet)" : "") << "\n";
   }
@@ -131,6 +133,18 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const Hi
   ModelFitOptions mo;
   mo.validation_fraction = fo.validation_fraction;
   mo.validation_start = fo.validation_start;
+  // Effects only added to the last model: that model, fitted again as it was, starts the new
+  // one's search and bounds it (ModelFitOptions::extends), so adding an effect never fits the
+  // estimation part worse than the model it was added to.
+  std::optional<ModelFit> extended;
+  if (last && *last != spec &&
+      std::all_of(last->effects.begin(), last->effects.end(), [&spec](const EffectSpec& e) {
+        const EffectSpec* in = spec.find(e.name);
+        return in && *in == e;
+      })) {
+    extended = fit_model(d.op, d.pv, d.sample_period(), *last, mo);
+    mo.extends = &*extended;
+  }
   const ModelFit f = fit_model(d.op, d.pv, d.sample_period(), spec, mo);
   ResidualAnalysis where;
   if (f.status != ModelFitStatus::NoStableModel) {

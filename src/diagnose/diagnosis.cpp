@@ -468,6 +468,8 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // few samples (a lag takes some of it), not across the record, and scanning every delay up
   // to an eighth of the record in each trial cost a climb minutes (3300 samples: 79 s, not 9).
   ModelFitOptions to = fo;
+  // Each trial extends the model: the model's fit starts its search and bounds it (extends).
+  to.extends = &step.fit;
   // An integrator trial on a model that does not integrate is judged, as that model is, on its
   // simulated output: fitted to it too.
   if (!model.has("integrator")) to.integrating_horizon = 0;

@@ -693,7 +693,7 @@ LinearFit ArxEstimator::pick(const std::vector<LinearFit>& fits) const {
 LinearFit ArxEstimator::refine(const LinearFit& ls, const std::vector<double>& x,
                                int iterations) const {
   LinearFit best = ls;
-  if (!ls.ok || opt_.drift) return best;
+  if (!ls.ok) return best;
   const std::size_t N = end_;
   const int na = ls.structure.na, nb = ls.structure.nb, nk = ls.structure.nk;
   const int p = na + nb + 1;
@@ -748,8 +748,13 @@ LinearFit ArxEstimator::refine(const LinearFit& ls, const std::vector<double>& x
     f.b.resize(static_cast<std::size_t>(nb));
     for (int i = 0; i < na; ++i) f.a[static_cast<std::size_t>(i)] = -th[i];
     for (int k = 0; k < nb; ++k) f.b[static_cast<std::size_t>(k)] = th[na + k];
-    // The constant of the filtered equation is c / A_prev(1); the model's is c.
+    // The constant of the filtered equation is c / A_prev(1); the model's is c (with drift: a
+    // flat load, its knots all equal, as fit_from starts).
     f.c = th[p - 1] * a1;
+    if (opt_.drift) {
+      f.drift_knots.assign(knots_, f.c);
+      f.c = 0.0;
+    }
     if (!stable(f.a)) break;
     const double sse = window_sse(f, x);
     if (!std::isfinite(sse)) break;
@@ -765,7 +770,7 @@ LinearFit ArxEstimator::refine(const LinearFit& ls, const std::vector<double>& x
 }
 
 LinearFit ArxEstimator::fit_output_error(const std::vector<double>& x, int iterations) const {
-  if (opt_.drift || iterations <= 0) return fit(x, true);
+  if (iterations <= 0 || opt_.drift) return fit(x, true);
   const Gram g = x_blocks(x);
   const auto& r = opt_.range;
   std::vector<LinearFit> fits;
@@ -788,6 +793,29 @@ LinearFit ArxEstimator::fit_output_error(const std::vector<double>& x, int itera
         fits.push_back(std::move(f));
       }
   return pick(fits);
+}
+
+LinearFit ArxEstimator::fit_from(const LinearFit& start, const std::vector<double>& x,
+                                 int iterations) const {
+  const auto& r = opt_.range;
+  const ArxStructure& st = start.structure;
+  if (x.size() != y_.size() || static_cast<int>(start.a.size()) != st.na ||
+      static_cast<int>(start.b.size()) != st.nb || st.na > r.na_max || st.nb < 1 ||
+      st.nk < r.nk_min || st.nk + st.nb > r.nk_max + r.nb_max)
+    return {};
+  LinearFit f;
+  f.structure = st;
+  f.a = start.a;
+  f.b = start.b;
+  if (!start.drift_knots.empty()) return {};
+  if (opt_.drift)
+    f.drift_knots.assign(knots_, start.c);
+  else
+    f.c = start.c;
+  if (!stable(f.a)) return {};
+  score(f, window_sse(f, x), kInf);
+  if (!f.ok || iterations <= 0) return f;
+  return refine(f, x, iterations);
 }
 
 std::vector<double> ArxEstimator::drift_series(const LinearFit& f) const {

@@ -14,6 +14,7 @@
 #include <optional>
 #include <stdexcept>
 #include <unordered_map>
+#include <utility>
 
 #include "valvediag/core/autocorrelation.hpp"
 #include "valvediag/core/identification.hpp"
@@ -295,7 +296,8 @@ std::vector<std::vector<double>> grid_starts(const std::vector<double>& costs, s
 
 // Global stage plus local polishes over the active coordinates; returns the winning polish's
 // NLopt result (s.best_z holds the best point seen).
-nlopt_result search_space(Search& s, const ModelFitOptions& opt) {
+nlopt_result search_space(Search& s, const ModelFitOptions& opt,
+                          const std::vector<double>* start = nullptr) {
   const int dim = static_cast<int>(s.dim());
   const int n_global = opt.global_evaluations > 0 ? opt.global_evaluations : 100 * dim;
   const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations : 60 * dim;
@@ -312,6 +314,7 @@ nlopt_result search_space(Search& s, const ModelFitOptions& opt) {
     run_nlopt(NLOPT_GN_DIRECT_L, s, z, n_global, 0.0);
     starts.push_back(s.restrict_to_active(s.best_z));
   }
+  if (start) starts.push_back(s.restrict_to_active(*start));
   // Independent polishes, one per start, on the cores.
   std::vector<nlopt_result> results(starts.size(), NLOPT_SUCCESS);
   std::vector<double> ends(starts.size(), std::numeric_limits<double>::infinity());
@@ -796,7 +799,8 @@ nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt)
 // The valve coordinates' search: one effect alone by search_space; composed chains each effect
 // first on its own (the others at rest), then a joint polish of all coordinates from there (a
 // joint grid is too coarse in 4 or more dimensions). The best point is left in s.best_z.
-nlopt_result search_valve(Search& s, const ModelFitOptions& opt) {
+nlopt_result search_valve(Search& s, const ModelFitOptions& opt,
+                          const std::vector<double>* start = nullptr) {
   if (s.effects.size() > 1) {
     s.base = neutral_point(s);
     // Two passes: an effect fitted with the others still at rest can take a wrong basin.
@@ -806,14 +810,66 @@ nlopt_result search_valve(Search& s, const ModelFitOptions& opt) {
     std::vector<double> zj = s.restrict_to_active(s.base);
     const int n_local =
         opt.local_evaluations > 0 ? opt.local_evaluations : 60 * static_cast<int>(s.coords.size());
-    return run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, nullptr, 0.02).result;
+    double end = 0.0;
+    nlopt_result r =
+        run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, &end, 0.02).result;
+    if (start) {  // a second joint polish, from the extended model's point (s.best_z: the better)
+      double end_start = 0.0;
+      s.base = *start;
+      std::vector<double> zs = s.restrict_to_active(*start);
+      const nlopt_result rs =
+          run_nlopt(NLOPT_LN_NELDERMEAD, s, zs, n_local, opt.local_xtol, &end_start, 0.02).result;
+      if (end_start < end) r = rs;
+    }
+    return r;
   }
   if (!s.profiled.empty()) {
     s.base = neutral_point(s);
     s.active = s.searched();
   }
   if (s.effects.size() == 1 && s.effects[0].name == "preisach") return search_effect(s, 0, opt);
-  return search_space(s, opt);
+  return search_space(s, opt, start);
+}
+
+// The output-error refinement from the linear part of `m`, a fit of a model this one extends,
+// for valve position x: the extended model itself when nothing improves on it. Not ok when the
+// two differ in integrating or `m` carries a load (its knots are not kept).
+LinearFit extended_linear_fit(const ArxEstimator& est, const ModelFit& m,
+                              const std::vector<double>& x, const ModelFitOptions& opt) {
+  if (m.integrating != est.options().integrating || !m.disturbance.empty() || m.a.empty() ||
+      m.b.empty() || m.structure.nk < 0)
+    return {};
+  LinearFit start;
+  start.structure = m.structure;
+  start.a = m.a;
+  start.b = m.b;
+  start.c = m.c;
+  start.ok = true;
+  return est.fit_from(start, x, opt.output_error_iterations);
+}
+
+// The coordinates of `m`, a fit of a model the search's spec extends, with the added effects at
+// rest (neutral_point); nullopt when `m` holds none of the search's effects.
+std::optional<std::vector<double>> extended_point(const Search& s, const ModelFit& m) {
+  std::vector<double> z = neutral_point(s);
+  std::size_t off = 0;
+  bool any = false;
+  for (const auto& e : m.spec.effects) {
+    const auto c = search_parameters(e, s.range);
+    if (c.empty()) continue;
+    if (off + c.size() > m.valve_coordinates.size()) return std::nullopt;
+    for (std::size_t k = 0; k < s.effects.size(); ++k) {
+      const std::size_t end = k + 1 < s.offset.size() ? s.offset[k + 1] : s.coords.size();
+      if (s.effects[k] == e && end - s.offset[k] == c.size()) {
+        std::copy_n(m.valve_coordinates.begin() + static_cast<std::ptrdiff_t>(off), c.size(),
+                    z.begin() + static_cast<std::ptrdiff_t>(s.offset[k]));
+        any = true;
+      }
+    }
+    off += c.size();
+  }
+  if (off != m.valve_coordinates.size() || !any) return std::nullopt;
+  return z;
 }
 
 namespace {
@@ -902,7 +958,10 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
   fit.stop_reason = "no valve parameters to search";
   std::optional<LinearFit> final_fit;  // the output-error fit of the final z, when made below
   if (!s.coords.empty()) {
-    nlopt_result outcome = search_valve(s, opt);
+    const std::optional<std::vector<double>> ze =
+        opt.extends && opt.extends->x_hat.size() == u.size() ? extended_point(s, *opt.extends)
+                                                             : std::nullopt;
+    nlopt_result outcome = search_valve(s, opt, ze ? &*ze : nullptr);
     z = s.best_z;
     const Search* won = &s;
     if (p.delay_window()) {
@@ -929,12 +988,23 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
       // part is the output-error refinement. The chain at rest (x = u) is the model without the
       // effects: keep it when its refined fit is better, so that a model with an effect added
       // never fits the estimation data worse than the model without it.
+      // So is the model it extends (ModelFitOptions::extends), its added effects at rest.
       const std::vector<double> zn = neutral_point(s);
       LinearFit fb = est.fit_output_error(s.valve_position(z.data()), opt.output_error_iterations);
       LinearFit fn = est.fit_output_error(s.valve_position(zn.data()), opt.output_error_iterations);
       const bool neutral = fn.ok && (!fb.ok || fn.sse < fb.sse);
       if (neutral) z = zn;
       final_fit = std::move(neutral ? fn : fb);
+      if (ze) {
+        const std::vector<double> xe = s.valve_position(ze->data());
+        for (LinearFit fe :
+             {*ze != z ? est.fit_output_error(xe, opt.output_error_iterations) : LinearFit{},
+              extended_linear_fit(est, *opt.extends, xe, opt)})
+          if (fe.ok && (!final_fit->ok || fe.sse < final_fit->sse)) {
+            z = *ze;
+            final_fit = std::move(fe);
+          }
+      }
     }
     switch (outcome) {
       case NLOPT_SUCCESS:
@@ -969,8 +1039,13 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
   }
   fit.x_hat = s.coords.empty() ? u : s.valve_position(z.data());
   // The fit of this x_hat is made above when the refinement chose z: the same fit, not made again.
-  const LinearFit f = final_fit ? std::move(*final_fit)
-                                : est.fit_output_error(fit.x_hat, opt.output_error_iterations);
+  LinearFit f = final_fit ? std::move(*final_fit)
+                          : est.fit_output_error(fit.x_hat, opt.output_error_iterations);
+  if (!final_fit && opt.extends && opt.extends->x_hat == fit.x_hat) {
+    // Only process effects added (no valve search): the extended model's linear part is a start.
+    LinearFit fe = extended_linear_fit(est, *opt.extends, fit.x_hat, opt);
+    if (fe.ok && (!f.ok || fe.sse < f.sse)) f = std::move(fe);
+  }
   ++fit.evaluations;
   if (!f.ok) {
     fit.status = ModelFitStatus::NoStableModel;

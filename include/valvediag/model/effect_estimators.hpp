@@ -94,6 +94,11 @@ class ArxEstimator {
   // its outside roots reflected inside, and counts only when its refined fit beats the record's
   // mean (fitness above 0). Without drift terms only (with them: fit(x, true)).
   LinearFit fit_output_error(const std::vector<double>& x, int iterations) const;
+  // The output-error refinement (as fit_output_error's) from a given linear part without a load,
+  // for x: the start is scored and kept unless an iterate does better. With drift its constant is
+  // a flat load (knots all equal; the load's own knots are fitted by least squares, as in fit()).
+  // Not ok when the start's structure is outside this estimator's range or its A is unstable.
+  LinearFit fit_from(const LinearFit& start, const std::vector<double>& x, int iterations) const;
   // Simulated output over the whole record (samples before start() copied from y; the drift
   // held after end()).
   std::vector<double> simulate(const LinearFit& f, const std::vector<double>& x) const;

@@ -29,6 +29,8 @@ namespace valvediag {
 
 enum class GlobalSearch { DirectL, Grid };
 
+struct ModelFit;
+
 struct ModelFitOptions {
   StructureRange structure;  // the base grid (small: every trial fit of `diagnose` pays for it)
   // nk range with `delay`; 0: the longest dead time the record can show, an eighth of the
@@ -63,6 +65,12 @@ struct ModelFitOptions {
   // (ArxEstimator::fit_output_error); 0: least squares only.
   int output_error_iterations = 5;
   int threads = 0;  // 0: all cores (Grid search, preisach, fit_models)
+  // A fit of a model this spec extends (diagnose: the step's model, each trial adding an effect to
+  // it), on the same data: its valve parameters, the added effects at rest, start the valve search
+  // and stay a candidate of the final choice, so the wider model never fits the estimation data
+  // worse than the one it extends (a search of more coordinates on a coarser grid can miss the
+  // narrower model's basin). nullptr: the search starts from every effect at rest.
+  const ModelFit* extends = nullptr;
   // Set by another thread: the fit throws Cancelled (core/cancel.hpp) at its next valve-search
   // evaluation or identify() structure. Every trial fit of a diagnosis shares DiagnoseOptions::fit.
   const std::atomic<bool>* cancel = nullptr;
