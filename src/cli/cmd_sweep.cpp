@@ -36,12 +36,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-double duration_option(const std::string& opt, const std::string& v) {
-  const auto d = parse_duration(v);
-  if (!d || !(*d > 0)) throw UsageError(opt + " '" + v + "': give e.g. 90s, 10m or 4h");
-  return *d;
-}
-
 // "I/N" with 0 <= I < N.
 std::pair<int, int> parse_shard(const std::string& s) {
   const auto slash = s.find('/');
@@ -108,8 +102,9 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
       in.require_pv = false;  // an OP-only loop still gives its OP figures
       d = load_data(in, notes);
     } else {
-      const auto end = recorded_end_s(a.db, job.name);
-      if (!end) {
+      std::optional<RecordedLoop> r =
+          read_latest_window(a.db, job.name, window_s, a.layout.csv.max_rows);
+      if (!r) {
         LoopAssessment x;
         x.loop = job.name;
         x.source = a.db;
@@ -118,11 +113,8 @@ std::string assess_job(const LoopJob& job, const SweepArgs& a, double window_s, 
                    ": record first (valvediag record, or sweep --record 10m)";
         return assessment_json(x).dump();
       }
-      RecordedLoop r =
-          read_recorded_loop(a.db, job.name, std::max(0.0, *end - window_s), *end, 0,
-                             /*longest_clean=*/true, kBridgedTicks, a.layout.csv.max_rows);
-      d = std::move(r.data);
-      d.source = a.db + " (run " + std::to_string(r.run) + ")";
+      d = std::move(r->data);
+      d.source = a.db + " (run " + std::to_string(r->run) + ")";
     }
   } catch (const DataError& e) {
     LoopAssessment x = failed(job, job.file.empty() ? a.db : job.file, e.what());
@@ -223,27 +215,6 @@ void write_outputs(const SweepArgs& a, const SweepInfo& info,
   }
 }
 
-// --loops: names, or shell patterns (benchmark.chemicals.*) when they hold * ? or [.
-bool selected(const std::vector<std::string>& wanted, const std::string& name) {
-  if (wanted.empty()) return true;
-  for (const auto& w : wanted)
-    if (w == name || fnmatch(w.c_str(), name.c_str(), 0) == 0) return true;
-  return false;
-}
-
-// A name or pattern of --loops that selects none of `names`: a typo, said before any work.
-void check_selection(const std::vector<std::string>& wanted, const std::vector<std::string>& names,
-                     const std::string& where) {
-  for (const auto& w : wanted)
-    if (std::none_of(names.begin(), names.end(),
-                     [&](const std::string& n) { return selected({w}, n); })) {
-      std::string list;
-      for (std::size_t i = 0; i < names.size() && i < 20; ++i) list += (i ? ", " : "") + names[i];
-      if (names.size() > 20) list += ", ... (" + std::to_string(names.size() - 20) + " more)";
-      throw UsageError("--loops: no loop '" + w + "' in " + where + "; its loops: " + list);
-    }
-}
-
 // The loops of the data files: one per CSV file; one per loop of a .mat file that holds
 // several (an International Stiction Database file holds a hundred). A .mat file that cannot
 // be listed stays one job, whose reading then reports why.
@@ -293,6 +264,33 @@ void record_first(const SweepArgs& a, const std::vector<std::string>& loops, dou
 }
 
 }  // namespace
+
+double duration_option(const std::string& opt, const std::string& v) {
+  const auto d = parse_duration(v);
+  if (!d || !(*d > 0)) throw UsageError(opt + " '" + v + "': give e.g. 90s, 10m or 4h");
+  return *d;
+}
+
+// --loops: names, or shell patterns (benchmark.chemicals.*) when they hold * ? or [.
+bool selected(const std::vector<std::string>& wanted, const std::string& name) {
+  if (wanted.empty()) return true;
+  for (const auto& w : wanted)
+    if (w == name || fnmatch(w.c_str(), name.c_str(), 0) == 0) return true;
+  return false;
+}
+
+// A name or pattern of --loops that selects none of `names`: a typo, said before any work.
+void check_selection(const std::vector<std::string>& wanted, const std::vector<std::string>& names,
+                     const std::string& where) {
+  for (const auto& w : wanted)
+    if (std::none_of(names.begin(), names.end(),
+                     [&](const std::string& n) { return selected({w}, n); })) {
+      std::string list;
+      for (std::size_t i = 0; i < names.size() && i < 20; ++i) list += (i ? ", " : "") + names[i];
+      if (names.size() > 20) list += ", ... (" + std::to_string(names.size() - 20) + " more)";
+      throw UsageError("--loops: no loop '" + w + "' in " + where + "; its loops: " + list);
+    }
+}
 
 void add_sweep(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(

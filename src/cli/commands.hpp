@@ -45,8 +45,17 @@ void add_serve(CLI::App& app, int& exit_code);
 RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const std::string& from,
                           const std::string& to, std::int64_t run = 0,
                           std::size_t max_rows = kDefaultMaxRows);
+// A duration option ("90s", "10m", "4h"): positive seconds, else a UsageError naming `opt`.
+double duration_option(const std::string& opt, const std::string& v);
 // "A,B,,C" -> {A, B, C}: the --loops lists of record and sweep.
 std::vector<std::string> split_names(const std::string& s);
+// --loops of sweep and serve: `name` is one of `wanted`'s names, or matches one of its shell
+// patterns (benchmark.chemicals.*); every name when `wanted` is empty.
+bool selected(const std::vector<std::string>& wanted, const std::string& name);
+// A UsageError for a name or pattern of `wanted` that selects none of `names` (a typo), naming
+// `where` and its loops.
+void check_selection(const std::vector<std::string>& wanted, const std::vector<std::string>& names,
+                     const std::string& where);
 // The recorder's end-of-run summary (record and demo).
 std::string recorder_summary(const RecorderStatus& s, const std::string& db, std::int64_t run);
 

@@ -103,30 +103,46 @@ void say_where(const std::string& where, const std::string& table, std::size_t t
 
 }  // namespace
 
-void record_history(const HistoryPlace& p, const std::vector<HistoryEntry>& entries,
-                    const std::string& result) {
-  if (p.empty() || entries.empty()) return;
-  const char* elsewhere = " (--no-history skips this, --history FILE puts it elsewhere)\n";
+HistoryAppended append_history_at(const HistoryPlace& p, const std::vector<HistoryEntry>& entries) {
+  HistoryAppended out;
+  if (p.empty() || entries.empty()) return out;
   if (!p.db.empty()) {
     std::vector<StoredHistoryEntry> rows;
     for (const HistoryEntry& e : entries)
       rows.push_back({e.model, e.time, history_entry_to_json(e)});
     try {
-      say_where(p.db, "table model_history, ", append_recording_history(p.db, p.key, rows));
-      return;
+      out.total = append_recording_history(p.db, p.key, rows);
+      out.where = p.where();
+      return out;
     } catch (const std::exception& e) {
-      std::cerr << "warning: " << e.what() << "; "
-                << (p.file.empty() ? result + " stands without a model history" + elsewhere
-                                   : "the model history goes to the state directory instead\n");
+      if (p.file.empty()) {
+        out.error = e.what();
+        return out;
+      }
+      out.warnings.push_back(e.what());
     }
-    if (p.file.empty()) return;
   }
   std::string why;
-  std::size_t total = 0;
-  if (try_append_history(p.file, entries, why, &total))
-    say_where(p.file, "", total);
+  if (try_append_history(p.file, entries, why, &out.total))
+    out.where = p.file;
   else
-    std::cerr << "warning: " << why << "; " << result << " stands" << elsewhere;
+    out.error = why;
+  return out;
+}
+
+void record_history(const HistoryPlace& p, const std::vector<HistoryEntry>& entries,
+                    const std::string& result) {
+  const char* elsewhere = " (--no-history skips this, --history FILE puts it elsewhere)\n";
+  const HistoryAppended r = append_history_at(p, entries);
+  for (const auto& w : r.warnings)
+    std::cerr << "warning: " << w << "; the model history goes to the state directory instead\n";
+  if (!r.error.empty())
+    std::cerr << "warning: " << r.error << "; " << result
+              << (p.db.empty() || !p.file.empty() ? " stands" : " stands without a model history")
+              << elsewhere;
+  else if (!r.where.empty())
+    say_where(r.where == p.file ? p.file : p.db, r.where == p.file ? "" : "table model_history, ",
+              r.total);
 }
 
 }  // namespace valvediag::cli

@@ -44,6 +44,18 @@ std::vector<HistoryEntry> load_history_at(const HistoryPlace& p);
 // The same, but what cannot be read is a warning on stderr, {}, and `p` cleared: it is left as
 // it is, not rewritten.
 std::vector<HistoryEntry> read_history_or_warn(HistoryPlace& p);
+// What adding entries to a history did: where they went and how many the history now holds, or
+// why they could not be kept (`total` 0, `where` empty); `warnings`: a recording that could not
+// take them, whose fallback file did.
+struct HistoryAppended {
+  std::string where;
+  std::size_t total = 0;
+  std::string error;
+  std::vector<std::string> warnings;
+};
+// Adds `entries` to `p` (a recording's table, else or when it cannot take them the file).
+// Nothing to do (`p` or `entries` empty): an empty result.
+HistoryAppended append_history_at(const HistoryPlace& p, const std::vector<HistoryEntry>& entries);
 // Adds `entries` to `p` and says where on stdout ("model history: PATH (3 fits)"), or warns on
 // stderr that `result` stands without it. A recording that cannot take them (read-only, busy for
 // a second) is a warning and the fallback file takes them. Nothing when `p` is empty or the list

@@ -192,6 +192,7 @@ struct Recorder::Impl {
   RecorderStatus status(double elapsed) {
     std::lock_guard lock(mutex);
     RecorderStatus s;
+    s.run = run;
     s.elapsed_s = elapsed;
     s.rows = rows;
     s.committed = committed;
@@ -251,7 +252,11 @@ struct Recorder::Impl {
       interrupted_marked = true;
     }
     if (run == 0) {
-      run = db->begin_run(site.file, started_utc);
+      const std::int64_t r = db->begin_run(site.file, started_utc);
+      {
+        std::lock_guard lock(mutex);  // status() reads it from other threads
+        run = r;
+      }
       db_lock->set_run(run);
     }
     for (auto& l : loops)

@@ -301,10 +301,9 @@ std::string fmt_time(double t) {
 }
 }  // namespace
 
-RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
-                                std::optional<double> from_s, std::optional<double> to_s,
-                                std::int64_t run, bool longest_clean, std::size_t bridge_ticks,
-                                std::size_t max_rows) {
+namespace {
+// A recording opened read-only for the readers; errors name the file and what to do.
+std::unique_ptr<sqlite3, int (*)(sqlite3*)> open_recording(const std::string& db_path) {
   if (!std::filesystem::exists(db_path))
     throw std::runtime_error(
         db_path + ": no such database; record one with valvediag record --db " + db_path);
@@ -313,12 +312,34 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     sqlite3_close(c);
     throw std::runtime_error(db_path + ": cannot open the database");
   }
+  std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(c, sqlite3_close);
   sqlite3_busy_timeout(c, 5000);
-  struct Closer {
-    sqlite3* c;
-    ~Closer() { sqlite3_close(c); }
-  } closer{c};
   require_recording(c, db_path);
+  return db;
+}
+}  // namespace
+
+std::vector<std::string> recorded_loops(const std::string& db_path) {
+  const auto db = open_recording(db_path);
+  sqlite3* c = db.get();
+  sqlite3_stmt* s = nullptr;
+  if (sqlite3_prepare_v2(c, "SELECT DISTINCT name FROM loops ORDER BY name", -1, &s, nullptr) !=
+      SQLITE_OK)
+    throw std::runtime_error(db_path + ": " + sqlite3_errmsg(c) +
+                             " (is this a valvediag recording?)");
+  std::vector<std::string> names;
+  while (sqlite3_step(s) == SQLITE_ROW)
+    names.emplace_back(reinterpret_cast<const char*>(sqlite3_column_text(s, 0)));
+  sqlite3_finalize(s);
+  return names;
+}
+
+RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& name,
+                                std::optional<double> from_s, std::optional<double> to_s,
+                                std::int64_t run, bool longest_clean, std::size_t bridge_ticks,
+                                std::size_t max_rows) {
+  const auto db = open_recording(db_path);
+  sqlite3* c = db.get();
   auto prepare = [&](const char* sql) {
     sqlite3_stmt* s = nullptr;
     if (sqlite3_prepare_v2(c, sql, -1, &s, nullptr) != SQLITE_OK)
@@ -375,11 +396,7 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
     sqlite3_finalize(s);
     if (!found) {
       std::string names;
-      sqlite3_stmt* l = prepare("SELECT DISTINCT name FROM loops ORDER BY name");
-      while (sqlite3_step(l) == SQLITE_ROW)
-        names += (names.empty() ? "" : ", ") +
-                 std::string(reinterpret_cast<const char*>(sqlite3_column_text(l, 0)));
-      sqlite3_finalize(l);
+      for (const std::string& n : recorded_loops(db_path)) names += (names.empty() ? "" : ", ") + n;
       throw std::runtime_error(db_path + ": no loop '" + name + "'" +
                                (run > 0 ? " in run " + std::to_string(run) : "") +
                                "; recorded loops: " + (names.empty() ? "none" : names));

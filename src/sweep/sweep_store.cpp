@@ -2,6 +2,7 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <optional>
@@ -232,7 +233,8 @@ std::vector<std::string> SweepStore::assessed_loops() {
   return out;
 }
 
-std::optional<double> recorded_end_s(const std::string& db_path, const std::string& loop) {
+std::optional<double> recorded_end_s(const std::string& db_path, const std::string& loop,
+                                     std::int64_t run) {
   const std::unique_ptr<sqlite3, int (*)(sqlite3*)> db(open_db(db_path, SQLITE_OPEN_READONLY),
                                                        sqlite3_close);
   // A database without recordings (only sweep results) has recorded nothing.
@@ -240,16 +242,26 @@ std::optional<double> recorded_end_s(const std::string& db_path, const std::stri
   sqlite3_stmt* s = nullptr;
   const char* sql =
       "SELECT l.sample_period, (SELECT MAX(tick) FROM samples WHERE loop_id = l.id) FROM loops l "
-      "WHERE l.name = ? ORDER BY l.run_id DESC LIMIT 1";
+      "WHERE l.name = ?1 AND (?2 = 0 OR l.run_id = ?2) ORDER BY l.run_id DESC LIMIT 1";
   if (sqlite3_prepare_v2(db.get(), sql, -1, &s, nullptr) != SQLITE_OK)
     throw std::runtime_error(db_path + ": " + sqlite3_errmsg(db.get()) +
                              " (is this a valvediag recording?)");
   sqlite3_bind_text(s, 1, loop.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_int64(s, 2, run);
   std::optional<double> end;
   if (sqlite3_step(s) == SQLITE_ROW && sqlite3_column_type(s, 1) != SQLITE_NULL)
     end = (static_cast<double>(sqlite3_column_int64(s, 1)) + 1.0) * sqlite3_column_double(s, 0);
   sqlite3_finalize(s);
   return end;
+}
+
+std::optional<RecordedLoop> read_latest_window(const std::string& db_path, const std::string& loop,
+                                               double window_s, std::size_t max_rows,
+                                               std::int64_t run) {
+  const auto end = recorded_end_s(db_path, loop, run);
+  if (!end) return std::nullopt;
+  return read_recorded_loop(db_path, loop, std::max(0.0, *end - window_s), *end, run,
+                            /*longest_clean=*/true, kBridgedTicks, max_rows);
 }
 
 }  // namespace valvediag

@@ -127,6 +127,9 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
                                 std::optional<double> to_s = std::nullopt, std::int64_t run = 0,
                                 bool longest_clean = false, std::size_t bridge_ticks = 0,
                                 std::size_t max_rows = kDefaultMaxRows);
+// The names of the loops recorded in `db_path` (any run), sorted. Opens it read-only; throws
+// std::runtime_error naming the file when it does not exist or holds no recordings.
+std::vector<std::string> recorded_loops(const std::string& db_path);
 // The short gaps the analysis commands bridge (a loop's dynamics span many samples; two
 // interpolated samples are within the noise of identification).
 inline constexpr std::size_t kBridgedTicks = 2;
@@ -153,6 +156,7 @@ struct LoopCounts {
 };
 
 struct RecorderStatus {
+  std::int64_t run = 0;  // the run being recorded; 0 until the database took it
   double elapsed_s = 0.0;
   std::uint64_t rows = 0;       // rows produced
   std::uint64_t committed = 0;  // rows in the database

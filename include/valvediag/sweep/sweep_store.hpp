@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "valvediag/recorder/recorder.hpp"
 #include "valvediag/recorder/schema_versions.hpp"
 #include "valvediag/report/sweep_report.hpp"
 #include "valvediag/sweep/loop_assessment.hpp"
@@ -53,8 +54,17 @@ class SweepStore {
   std::unique_ptr<Impl> impl_;
 };
 
-// End of the latest recording of `loop` in seconds from its run's start (last tick + one
-// period), or nullopt when the database holds no sample of it.
-std::optional<double> recorded_end_s(const std::string& db_path, const std::string& loop);
+// End of the latest recording of `loop` (of run `run`; 0: the latest run that recorded it) in
+// seconds from its run's start (last tick + one period), or nullopt when the database holds no
+// sample of it.
+std::optional<double> recorded_end_s(const std::string& db_path, const std::string& loop,
+                                     std::int64_t run = 0);
+// The latest `window_s` seconds recorded of `loop` (of run `run`, 0: the latest), as the
+// analysis reads them: short gaps bridged, the longest clean stretch when gaps are left
+// (read_recorded_loop with kBridgedTicks). nullopt when nothing is recorded; read_recorded_loop's
+// errors otherwise (std::runtime_error: nothing clean in the window; DataError: too many rows).
+std::optional<RecordedLoop> read_latest_window(const std::string& db_path, const std::string& loop,
+                                               double window_s, std::size_t max_rows,
+                                               std::int64_t run = 0);
 
 }  // namespace valvediag
