@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <thread>
 
@@ -20,6 +21,12 @@ json number(double x) {
   return std::isfinite(x) ? json(x) : json();
 }
 
+std::string number_text(double x) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", x);
+  return b;
+}
+
 double t_at(const LoopData& d, std::size_t i) {
   return d.t.empty() ? NAN : d.t[std::min(i, d.t.size() - 1)];
 }
@@ -32,25 +39,35 @@ ResidualAnalysis where_it_fails(const ModelFit& f, const LoopData& d) {
 }
 
 std::shared_ptr<const ModelStep> make_step(const std::string& action, ModelFit f,
-                                           ResidualAnalysis where) {
+                                           ResidualAnalysis where,
+                                           std::shared_ptr<const LoopData> data, double validate) {
   auto s = std::make_shared<ModelStep>();
   s->action = action;
   s->entry = history_entry(f, "workbench " + action);
   s->fit = std::move(f);
   s->where = std::move(where);
+  s->data = std::move(data);
+  s->validate = validate;
   return s;
 }
 
-// Appends the new models' rows to the loop's history file. One writer at a time: two loops served
-// from the same data share a file, and each append reads and rewrites it.
-json record_history(const LoopModels& models, const std::vector<HistoryEntry>& entries) {
-  if (models.history_file().empty() || entries.empty()) return json();
+// Appends the new models' rows to a history file. One writer at a time: two loops served from the
+// same data share a file, and each append reads and rewrites it.
+json append_to_file(const std::string& file, const std::vector<HistoryEntry>& entries) {
   static std::mutex writing;
   std::lock_guard<std::mutex> lock(writing);
   std::string why;
   std::size_t total = 0;
-  if (try_append_history(models.history_file(), entries, why, &total)) return {{"entries", total}};
+  if (try_append_history(file, entries, why, &total)) return {{"entries", total}};
   return {{"error", why + "; the models stand without it"}};
+}
+
+// What a job fitted: the samples and their time span, the held-out share.
+json data_summary(const LoopData& d, double validate) {
+  return {{"samples", d.size()},
+          {"from_s", number(d.t.empty() ? NAN : d.t.front())},
+          {"to_s", number(d.t.empty() ? NAN : d.t.back())},
+          {"validate", validate}};
 }
 
 json step_summary(std::size_t n, const ModelStep& s) {
@@ -58,7 +75,8 @@ json step_summary(std::size_t n, const ModelStep& s) {
           {"model", s.entry.model},
           {"action", s.action},
           {"fitness_percent", number(s.entry.fitness_percent)},
-          {"validation_fitness_percent", number(s.entry.validation_fitness_percent)}};
+          {"validation_fitness_percent", number(s.entry.validation_fitness_percent)},
+          {"data", data_summary(*s.data, s.validate)}};
 }
 
 }  // namespace
@@ -87,12 +105,40 @@ DiagnoseOptions ModelOptions::diagnose_options(const LoopData& d) const {
   return o;
 }
 
+LoopModels::LoopModels(std::string history_file) {
+  if (!history_file.empty())
+    writer_ = [file = std::move(history_file)](const std::vector<HistoryEntry>& e) {
+      return append_to_file(file, e);
+    };
+}
+
+json LoopModels::record_history(const std::vector<HistoryEntry>& entries) const {
+  if (!writer_ || entries.empty()) return json();
+  return writer_(entries);
+}
+
 json JobRequest::info() const {
   json j{{"action", action}};
   if (!model.empty()) j["model"] = model;
   if (!effect.empty()) j["effect"] = effect;
   if (action == "diagnose") j["climb"] = climb;
+  if (validate) j["validate"] = *validate;
+  if (last_s) j["last_s"] = *last_s;
   return j;
+}
+
+LoopData latest_part(const LoopData& d, double seconds) {
+  if (d.t.empty() || !(d.t.back() - d.t.front() > seconds)) return d;
+  // A hair below the start: 1 s of 5 ms samples is 201 of them, whatever the rounding of t.
+  const double from = d.t.back() - seconds - 1e-9 * std::max(1.0, std::abs(d.t.back()));
+  const auto first =
+      static_cast<std::size_t>(std::lower_bound(d.t.begin(), d.t.end(), from) - d.t.begin());
+  LoopData p = d;
+  const auto cut = [first](std::vector<double>& v) {
+    if (v.size() > first) v.erase(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(first));
+  };
+  for (auto* v : {&p.t, &p.op, &p.pv, &p.sp, &p.mv}) cut(*v);
+  return p;
 }
 
 JobRequest parse_job_request(const json& body) {
@@ -112,7 +158,23 @@ JobRequest parse_job_request(const json& body) {
   };
   JobRequest r;
   r.action = text("action");
-  std::vector<std::string> keys{"action"};
+  std::vector<std::string> keys{"action", "validate", "last_s"};
+  if (const auto it = body.find("validate"); it != body.end()) {
+    const double v = it->is_number() ? it->get<double>() : NAN;
+    if (!(v >= kMinJobValidate && v <= kMaxJobValidate))
+      throw std::invalid_argument(
+          "\"validate\" must be the held-out share, a number from " + number_text(kMinJobValidate) +
+          " to " + number_text(kMaxJobValidate) + ", got " + it->dump().substr(0, 40));
+    r.validate = v;
+  }
+  if (const auto it = body.find("last_s"); it != body.end()) {
+    const double v = it->is_number() ? it->get<double>() : NAN;
+    if (!(v > 0 && std::isfinite(v)))
+      throw std::invalid_argument(
+          "\"last_s\" must be a positive number of seconds (fit the latest that many), got " +
+          it->dump().substr(0, 40));
+    r.last_s = v;
+  }
   if (r.action == "fit") {
     r.model = text("model");
     (void)parse_model_spec(r.model);  // ModelSpecError (an invalid_argument) names the problem
@@ -169,10 +231,21 @@ void LoopModels::set_diagnosis(Diagnosed d) {
 
 json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const ModelOptions& opt,
              JobControl& control, std::size_t max_steps) {
+  return run_job(req, std::make_shared<const LoopData>(d), models, opt, control, max_steps);
+}
+
+json run_job(const JobRequest& req, std::shared_ptr<const LoopData> whole, LoopModels& models,
+             const ModelOptions& server, JobControl& control, std::size_t max_steps) {
   if (models.steps().size() >= max_steps)
     throw std::invalid_argument("this loop's ladder holds " + std::to_string(max_steps) +
                                 " models, the most the workbench keeps: download the ones to keep "
                                 "and restart valvediag serve for a new ladder");
+  // The request's own held-out share and part of the record, else the server's and all of it.
+  ModelOptions opt = server;
+  if (req.validate) opt.validate = *req.validate;
+  const std::shared_ptr<const LoopData> data =
+      req.last_s ? std::make_shared<const LoopData>(latest_part(*whole, *req.last_s)) : whole;
+  const LoopData& d = *data;
   const double Ts = d.sample_period();
   const auto current = models.last();
   // The model the request starts from: the ladder's last, else linear (diagnose's default).
@@ -197,22 +270,25 @@ json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const
       if (k == 0 && current) continue;
       const auto& s = r->steps[k];
       if (s.fit.status == ModelFitStatus::NoStableModel) continue;
-      auto step = make_step(req.climb ? "diagnose --auto" : "diagnose", s.fit, s.residual);
+      auto step = make_step(req.climb ? "diagnose --auto" : "diagnose", s.fit, s.residual, data,
+                            opt.validate);
       entries.push_back(step->entry);
       models.push(std::move(step));
     }
-    const json history = record_history(models, entries);
+    const json history = models.record_history(entries);
     json j = diagnosis_json(*r, d.t, VerdictText{});
     j.erase("verdict");  // the loop's verdict is /verdict's (loop_verdict), not this analysis'
     j.erase("unusable_reason");
-    models.set_diagnosis({r, j});
+    j["data"] = data_summary(d, opt.validate);
+    models.set_diagnosis({r, j, data});
     control.report(1.0, "done");
     return {{"model", j["model"]},
             {"findings", j["findings"]},
             {"conclusion", j["conclusion"]},
             {"steps_added", entries.size()},
             {"ladder_steps", models.steps().size()},
-            {"history", history}};
+            {"history", history},
+            {"data", j["data"]}};
   }
   ModelSpec spec = base;
   std::vector<EffectSpec> replaced;
@@ -238,19 +314,19 @@ json run_job(const JobRequest& req, const LoopData& d, LoopModels& models, const
   throw_if_cancelled(control.cancel_flag());  // a cancelled job leaves the ladder as it was
   const std::string action =
       req.action == "fit" ? "fit " + to_string(spec) : req.action + " " + req.effect;
-  auto step = make_step(action, std::move(f), std::move(where));
+  auto step = make_step(action, std::move(f), std::move(where), data, opt.validate);
   const HistoryEntry entry = step->entry;
   models.push(std::move(step));
   const auto steps = models.steps();
   json j = step_summary(steps.size() - 1, *steps.back());
-  j["history"] = record_history(models, {entry});
+  j["history"] = models.record_history({entry});
   j["replaced"] = json::array();
   for (const auto& e : replaced) j["replaced"].push_back(to_string(e));
   control.report(1.0, "done");
   return j;
 }
 
-json ladder_json(const LoopModels& models, const LoopData& d) {
+json ladder_json(const LoopModels& models) {
   const auto steps = models.steps();
   json rows = json::array();
   for (std::size_t n = 0; n < steps.size(); ++n) {
@@ -266,7 +342,7 @@ json ladder_json(const LoopModels& models, const LoopData& d) {
     json params = json::object();
     for (const auto& v : s.entry.parameters) params[v.name] = number(v.value);
     r["parameters"] = params;
-    r["estimation_end_s"] = number(t_at(d, s.fit.estimation_end));
+    r["estimation_end_s"] = number(t_at(*s.data, s.fit.estimation_end));
     r["valve_effect"] = has_valve_effect(s.fit.spec);
     r["time"] = s.entry.time;
     rows.push_back(std::move(r));
@@ -308,19 +384,19 @@ json signature_json(const ModelStep& s, const LoopData& d, double from, double t
   return j;
 }
 
-std::string report_html(const LoopModels& models, const LoopData& d, const std::string& name,
+std::string report_html(const LoopModels& models, const std::string& name,
                         const std::string& verdict) {
   const auto last = models.last();
   if (!last)
     throw std::invalid_argument(
         "no model yet: fit one first (POST /api/loops/{id}/jobs {\"action\":\"diagnose\"})");
   ReportContent c;
-  c.data = &d;
+  c.data = last->data.get();
   c.data_name = name;
   c.fit = &last->fit;
   c.where = &last->where;
   const auto dg = models.diagnosis();
-  if (dg && dg->diagnosis->last().fit.spec == last->fit.spec) {
+  if (dg && dg->data == last->data && dg->diagnosis->last().fit.spec == last->fit.spec) {
     c.diagnosis = dg->diagnosis.get();
     c.diagnosis_command = "valvediag serve: diagnose " + to_string(last->fit.spec);
   }

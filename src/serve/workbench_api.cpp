@@ -34,7 +34,8 @@ ApiResponse error(int status, const std::string& message) {
 }
 
 const char* kRoutes =
-    "the workbench has GET / (the page), GET /api/loops, /api/loops/{id}/series?from=S&to=S&"
+    "the workbench has GET / (the page), GET /api/loops, /api/status, "
+    "/api/loops/{id}/series?from=S&to=S&"
     "buckets=N, /api/loops/{id}/verdict, /api/loops/{id}/ladder, /api/loops/{id}/diagnosis, "
     "/api/loops/{id}/phase?from=S&to=S&points=N, /api/loops/{id}/models/{n}, "
     "/api/loops/{id}/models/{n}/simulation, /api/loops/{id}/models/{n}/signature, "
@@ -114,6 +115,20 @@ json number(double x) {
   return std::isfinite(x) ? json(x) : json();
 }
 
+// The held-out share parameter: a job's bounds.
+double share(const std::string& text) {
+  char* end = nullptr;
+  const double x = text.empty() ? NAN : std::strtod(text.c_str(), &end);
+  if (text.empty() || end != text.c_str() + text.size() ||
+      !(x >= kMinJobValidate && x <= kMaxJobValidate)) {
+    char b[160];
+    std::snprintf(b, sizeof b, "parameter 'validate' must be the held-out share, from %g to %g",
+                  kMinJobValidate, kMaxJobValidate);
+    throw BadRequest(std::string(b) + ", got '" + text.substr(0, 40) + "'");
+  }
+  return x;
+}
+
 }  // namespace
 
 std::string response_text(const ApiResponse& r) {
@@ -126,16 +141,43 @@ std::string response_type(const ApiResponse& r) {
 }
 
 WorkbenchApi::WorkbenchApi(std::vector<ServedLoop> loops, VerdictFunction verdict,
-                           std::string token, ModelOptions models, JobLimits limits)
+                           std::string token, ModelOptions models, JobLimits limits,
+                           StatusFunction status)
     : loops_(std::move(loops)),
       verdict_(std::move(verdict)),
       token_(std::move(token)),
       model_options_(models),
+      status_(std::move(status)),
       jobs_(limits) {
   for (std::size_t i = 0; i < loops_.size(); ++i) {
     cache_.push_back(std::make_unique<Cached>());
-    models_.push_back(std::make_unique<LoopModels>(loops_[i].history));
+    cache_.back()->snapshot = loops_[i].snapshot;
+    models_.push_back(loops_[i].history_writer
+                          ? std::make_unique<LoopModels>(loops_[i].history_writer)
+                          : std::make_unique<LoopModels>(loops_[i].history));
   }
+}
+
+std::shared_ptr<const LoopSnapshot> WorkbenchApi::snapshot(std::size_t id) const {
+  Cached& c = *cache_[id];
+  const auto current = [&c] {
+    std::lock_guard<std::mutex> lock(c.data);
+    return c.snapshot;
+  };
+  if (!loops_[id].live) return current();
+  const auto fresh = [&c] {
+    std::lock_guard<std::mutex> lock(c.data);
+    return std::chrono::steady_clock::now() - c.read_at <
+           std::chrono::duration<double>(kLiveRefreshS);
+  };
+  if (fresh()) return current();
+  std::lock_guard<std::mutex> one(c.reading);  // others asking meanwhile get its result
+  if (fresh()) return current();
+  std::shared_ptr<const LoopSnapshot> s = loops_[id].live();
+  std::lock_guard<std::mutex> lock(c.data);
+  c.read_at = std::chrono::steady_clock::now();
+  if (s) c.snapshot = std::move(s);
+  return c.snapshot;
 }
 
 WorkbenchApi::~WorkbenchApi() {
@@ -274,6 +316,13 @@ ApiResponse WorkbenchApi::route(const ApiRequest& req) const {
     return error(404, "no such endpoint: " + req.path.substr(0, 200) + "; " + kRoutes);
   };
   if (s.size() == 3 && s[0] == "api" && s[1] == "jobs") return job_route(req, s[2]);
+  if (s.size() == 2 && s[0] == "api" && s[1] == "status") {
+    if (auto bad = method_check(req, {"GET"})) return *bad;
+    only_params(req, {}, "GET /api/status takes none");
+    json j = status_ ? status_() : json::object();
+    j["live"] = static_cast<bool>(status_);
+    return {200, std::move(j)};
+  }
   if (s.size() < 2 || s[0] != "api" || s[1] != "loops") return not_found();
   if (s.size() == 2) {
     if (auto bad = method_check(req, {"GET"})) return *bad;
@@ -302,13 +351,14 @@ ApiResponse WorkbenchApi::loop_route(const ApiRequest& req, const std::vector<st
   const ServedLoop& loop = loops_[id];
   const LoopModels& models = *models_[id];
   if (s[3] == "jobs") return submit(req, id);
+  const std::shared_ptr<const LoopSnapshot> snap = snapshot(id);
   if (s[3] == "verdict") {
     only_params(req, {}, "GET /api/loops/{id}/verdict takes none");
     return {200, verdict_json(id)};
   }
   if (s[3] == "ladder") {
     only_params(req, {}, "GET /api/loops/{id}/ladder takes none");
-    json j = ladder_json(models, loop.model_data());
+    json j = ladder_json(models);
     j["id"] = id;
     return {200, std::move(j)};
   }
@@ -329,8 +379,8 @@ ApiResponse WorkbenchApi::loop_route(const ApiRequest& req, const std::vector<st
                             " has no model yet: fit one first (POST /api/loops/" +
                             std::to_string(id) + "/jobs with {\"action\":\"diagnose\"})");
     const std::string verdict = verdict_json(id).value("verdict", std::string());
-    return download(report_html(models, loop.model_data(), loop.name, verdict),
-                    "text/html; charset=utf-8", file_stem(loop.name) + "-report.html");
+    return download(report_html(models, loop.name, verdict), "text/html; charset=utf-8",
+                    file_stem(loop.name) + "-report.html");
   }
   if (s[3] == "models") {
     const auto steps = models.steps();
@@ -340,7 +390,7 @@ ApiResponse WorkbenchApi::loop_route(const ApiRequest& req, const std::vector<st
                             ": its ladder has " + std::to_string(steps.size()) +
                             " step(s), numbered from 0 (GET /api/loops/" + std::to_string(id) +
                             "/ladder)");
-    const LoopData& d = loop.model_data();
+    const LoopData& d = *steps[*n]->data;  // the data the step was fitted to
     if (s.size() == 6 && s[5] == "signature") {
       const ModelStep& step = *steps[*n];
       if (!has_valve_effect(step.fit.spec) || step.fit.x_hat.size() != d.size())
@@ -366,19 +416,28 @@ ApiResponse WorkbenchApi::loop_route(const ApiRequest& req, const std::vector<st
                     file_stem(loop.name) + "-model-" + std::to_string(*n) + ".json");
   }
   if (s[3] == "phase") {
-    // On the part the models are fitted to, with their split: the held-out samples flagged.
-    const LoopData& d = loop.model_data();
+    // On the part the models are fitted to, with their split: the held-out samples flagged (the
+    // last `validate` share, the server's by default).
+    const LoopData& d = snap->model_data();
     if (d.t.empty() || !d.has_pv())
       return error(404, "loop " + s[2] + " has no PV samples to plot against OP");
-    const Window w = window(req, d.t, "phase", true);
-    const std::size_t split = model_options_.estimation_end(d.size());
+    only_params(req, {"from", "to", "points", "validate"},
+                "phase takes from, to (s), points and validate (the held-out share)");
+    ModelOptions mo = model_options_;
+    if (const auto v = param(req, "validate")) mo.validate = share(*v);
+    ApiRequest rest = req;
+    rest.query.erase("validate");
+    const Window w = window(rest, d.t, "phase", true);
+    const std::size_t split = mo.estimation_end(d.size());
     json j = decimated_path(d.t, {{"op", &d.op}, {"pv", &d.pv}}, w.from, w.to, w.count, split);
     j["estimation_end_s"] = split < d.t.size() ? json(d.t[split]) : json();
     j["id"] = id;
     return {200, std::move(j)};
   }
-  const LoopData& d = loop.data;
-  if (d.t.empty()) return error(404, "loop " + s[2] + " has no samples");
+  const LoopData& d = snap->data;
+  if (d.t.empty())
+    return error(404, "loop " + s[2] + " has no samples" +
+                          (loop.live ? " recorded yet: ask again in a moment" : ""));
   const Window w = window(req, d.t, "series");
   json j = decimated_series(d, w.from, w.to, w.count);  // no sample in range: invalid_argument
   j["id"] = id;
@@ -407,10 +466,9 @@ ApiResponse WorkbenchApi::submit(const ApiRequest& req, std::size_t id) const {
   json info = jr.info();
   info["loop"] = id;
   LoopModels* models = models_[id].get();
-  const LoopData* data = &loops_[id].model_data();
   std::mutex* busy = &cache_[id]->jobs;
   const ModelOptions opt = model_options_;
-  const auto job = jobs_.submit(info, [=](JobControl& c) {
+  const auto job = jobs_.submit(info, [=, this](JobControl& c) {
     // One job per loop at a time: each starts from the model the one before left.
     std::unique_lock<std::mutex> lock(*busy, std::defer_lock);
     while (!lock.try_lock()) {
@@ -418,7 +476,9 @@ ApiResponse WorkbenchApi::submit(const ApiRequest& req, std::size_t id) const {
       c.report(0.0, "waiting for the loop's other job");
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
-    return run_job(jr, *data, *models, opt, c);
+    // The data as it is when the job starts: a live loop's recording so far.
+    const std::shared_ptr<const LoopSnapshot> snap = snapshot(id);
+    return run_job(jr, std::shared_ptr<const LoopData>(snap, &snap->model_data()), *models, opt, c);
   });
   if (!job)
     return error(503, "the job queue is full (" + std::to_string(jobs_.max_queued()) +
@@ -444,7 +504,9 @@ ApiResponse WorkbenchApi::job_route(const ApiRequest& req, const std::string& id
 json WorkbenchApi::loops_json() const {
   json list = json::array();
   for (std::size_t i = 0; i < loops_.size(); ++i) {
-    const LoopData& d = loops_[i].data;
+    const std::shared_ptr<const LoopSnapshot> snap = snapshot(i);
+    const LoopData& d = snap->data;
+    const LoopData& m = snap->model_data();
     json signals = json::array({"op"});
     if (d.has_pv()) signals.push_back("pv");
     if (d.has_sp()) signals.push_back("sp");
@@ -467,7 +529,10 @@ json WorkbenchApi::loops_json() const {
                     {"end_s", number(d.t.empty() ? NAN : d.t.back())},
                     {"start_clock", clock},
                     {"signals", signals},
-                    {"verdict", verdict}});
+                    {"verdict", verdict},
+                    {"analysed_start_s", number(m.t.empty() ? NAN : m.t.front())},
+                    {"validate", model_options_.validate},
+                    {"live", static_cast<bool>(loops_[i].live)}});
   }
   return json{{"loops", list}};
 }
@@ -475,26 +540,29 @@ json WorkbenchApi::loops_json() const {
 json WorkbenchApi::verdict_json(std::size_t id) const {
   Cached& c = *cache_[id];
   std::lock_guard<std::mutex> once(c.compute);
+  const std::shared_ptr<const LoopSnapshot> snap = snapshot(id);
   std::optional<json> have;
   {
     std::lock_guard<std::mutex> lock(c.value);
-    have = c.verdict;
+    if (c.verdict_of == snap) have = c.verdict;  // a live loop's grown data is judged again
   }
   const bool cached = have.has_value();
   double seconds = 0.0;
   if (!have) {
-    // Computed once, on the first request: a fit of a long record takes seconds.
+    // Computed once per version of the data, on the first request: a fit takes seconds.
     const auto t0 = std::chrono::steady_clock::now();
-    have = verdict_(loops_[id].data);
+    have = verdict_(snap->data);
     seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::lock_guard<std::mutex> lock(c.value);
     c.verdict = have;
+    c.verdict_of = snap;
   }
   json j = std::move(*have);
   j["id"] = id;
   j["name"] = loops_[id].name;
   j["cached"] = cached;
   j["seconds"] = seconds;
+  j["samples"] = snap->data.size();  // the data judged (a live loop's grows)
   return j;
 }
 

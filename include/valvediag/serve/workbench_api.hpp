@@ -9,6 +9,7 @@
 // 404), and the only files written are the loops' model histories (ServedLoop::history).
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <map>
 #include <memory>
@@ -19,25 +20,49 @@
 #include <vector>
 
 #include "valvediag/io/loop_data.hpp"
+#include "valvediag/report/model_history.hpp"
 #include "valvediag/serve/jobs.hpp"
 #include "valvediag/serve/loop_models.hpp"
 
 namespace valvediag::serve {
 
+// One version of a loop's data: as read, and the part the models are fitted to (diagnose's: the
+// CLI leaves a quiet lead-in out, as diagnose does; nullopt: all of `data`).
+struct LoopSnapshot {
+  LoopData data;
+  std::optional<LoopData> analysed;
+  const LoopData& model_data() const { return analysed ? *analysed : data; }
+};
+// Reads a live loop again (a recording as it grows): its latest data, or nullptr while there is
+// none. May throw: the request that asked gets an error, the data served stays as it was.
+using LoopReader = std::function<std::shared_ptr<const LoopSnapshot>()>;
+// Adds a job's new models to the loop's model history; the job's "history" (e.g. {"entries": N}
+// or {"error": why}).
+using HistoryWriter = std::function<nlohmann::json(const std::vector<HistoryEntry>&)>;
+
 struct ServedLoop {
   ServedLoop(std::string n, LoopData d, std::optional<LoopData> a = std::nullopt,
              std::string h = "")
-      : name(std::move(n)), data(std::move(d)), analysed(std::move(a)), history(std::move(h)) {}
-  std::string name;  // the loop's tag, else the file's stem
-  LoopData data;
-  // The part the models are fitted to: diagnose's (the CLI leaves a quiet lead-in out, as
-  // diagnose does); nullopt: all of `data`.
-  std::optional<LoopData> analysed;
-  const LoopData& model_data() const { return analysed ? *analysed : data; }
+      : name(std::move(n)),
+        snapshot(std::make_shared<const LoopSnapshot>(LoopSnapshot{std::move(d), std::move(a)})),
+        history(std::move(h)) {}
+  std::string name;                              // the loop's tag, else the file's stem
+  std::shared_ptr<const LoopSnapshot> snapshot;  // the data served (a live loop's first)
   // The loop's model history file, where the jobs' models are appended (the CLI: the state
   // directory's file for the data and its reading options, the one `ladder` reads); "": none.
   std::string history;
+  // Set: the models go there instead of `history` (the CLI: a recording's table model_history).
+  HistoryWriter history_writer;
+  // Set: the loop is live; its data is read again at most every kLiveRefreshS when asked for.
+  LoopReader live;
 };
+
+// A live loop is read again at most this often (s): a page polling every second reads the
+// recording once, however many of its charts ask.
+inline constexpr double kLiveRefreshS = 0.5;
+
+// GET /api/status's body beyond "live" (the CLI: the recorder's counters and its buses').
+using StatusFunction = std::function<nlohmann::json()>;
 
 // One request as the HTTP layer parsed it: the path already URL-decoded, the query's parameters
 // (a name given twice is kept twice, and refused), the Authorization, Cookie, Host and
@@ -99,8 +124,9 @@ class WorkbenchApi {
   // token: "" serves requests addressed to this machine by name (Host: localhost, 127.x, [::1]:
   // a web page that rebinds its own name to 127.0.0.1 gets a 403, not the plant's data); the CLI
   // then binds loopback only. Else every request needs `Authorization: Bearer TOKEN`.
+  // status: GET /api/status's counters (the recorder's, with --config); none: {"live": false}.
   WorkbenchApi(std::vector<ServedLoop> loops, VerdictFunction verdict, std::string token = "",
-               ModelOptions models = {}, JobLimits limits = {});
+               ModelOptions models = {}, JobLimits limits = {}, StatusFunction status = {});
   // Cancels the jobs and waits for them.
   ~WorkbenchApi();
   // Thread-safe; never throws: a bad request is a 4xx {"error": ...}, a failure inside a 500.
@@ -112,8 +138,15 @@ class WorkbenchApi {
     std::mutex compute;  // one computation per loop; other requests for it wait for its result
     std::mutex value;    // guards `verdict` only: listing the loops never waits for a fit
     std::optional<nlohmann::json> verdict;
-    std::mutex jobs;  // held by the loop's running job: one at a time per loop
+    std::shared_ptr<const LoopSnapshot> verdict_of;  // the data the verdict judged
+    std::mutex jobs;     // held by the loop's running job: one at a time per loop
+    std::mutex reading;  // one read of a live loop at a time
+    std::mutex data;     // guards `snapshot` and `read_at`
+    std::shared_ptr<const LoopSnapshot> snapshot;
+    std::chrono::steady_clock::time_point read_at{};
   };
+  // The loop's data now: a live loop's read again when older than kLiveRefreshS.
+  std::shared_ptr<const LoopSnapshot> snapshot(std::size_t id) const;
   ApiResponse route(const ApiRequest& req) const;
   ApiResponse loop_route(const ApiRequest& req, const std::vector<std::string>& s,
                          std::size_t id) const;
@@ -127,6 +160,7 @@ class WorkbenchApi {
   VerdictFunction verdict_;
   std::string token_;
   ModelOptions model_options_;
+  StatusFunction status_;
   std::vector<std::unique_ptr<Cached>> cache_;
   std::vector<std::unique_ptr<LoopModels>> models_;
   // Last: destroyed first, so no job outlives the loops and models it works on.
