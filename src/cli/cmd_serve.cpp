@@ -34,18 +34,25 @@ void check_workbench_bind(const WorkbenchSettings& w) {
                      "carry the random token printed at start");
 }
 
-serve::ServedLoop served_loop(std::string name, LoopData d, const WorkbenchSettings& w,
-                              std::vector<std::string>& notes) {
+serve::LoopSnapshot served_snapshot(LoopData d, const WorkbenchSettings& w,
+                                    std::vector<std::string>& notes) {
   // The models are fitted to the part diagnose analyses (a quiet lead-in left out).
   std::optional<LoopData> part;
   if (d.size() >= 200) {
     AnalysedPart p = analysed_part(d, w.keep_lead_in, w.range, notes);
     if (p.from_s > 0) part = std::move(p.data);
   }
-  return {std::move(name), std::move(d), std::move(part)};
+  return {std::move(d), std::move(part)};
 }
 
-void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings& w) {
+serve::ServedLoop served_loop(std::string name, LoopData d, const WorkbenchSettings& w,
+                              std::vector<std::string>& notes) {
+  serve::LoopSnapshot s = served_snapshot(std::move(d), w, notes);
+  return {std::move(name), std::move(s.data), std::move(s.analysed)};
+}
+
+void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings& w,
+                   const WorkbenchExtras& extras) {
   check_workbench_bind(w);
   // The very call diagnose makes for its verdict, with the same options and JSON keys.
   const OpRange range = w.range;
@@ -74,7 +81,7 @@ void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings
   limits.workers = w.jobs == 0 ? cores : std::min(w.jobs, cores);
   // The cores shared out: jobs times threads per fit stay within them.
   mo.threads = static_cast<int>(std::max(1u, cores / limits.workers));
-  const serve::WorkbenchApi api(std::move(loops), verdict, token, mo, limits);
+  const serve::WorkbenchApi api(std::move(loops), verdict, token, mo, limits, extras.status);
 
   httplib::Server srv;
   auto handler = [&api](const httplib::Request& req, httplib::Response& res) {
@@ -145,6 +152,7 @@ void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings
   // stop() only closes a socket listen_after_bind() has started on: a Ctrl-C before that would
   // leave the join below waiting for ever.
   while (!srv.is_running() && !ended) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  if (extras.listening) extras.listening();
   const std::string host = w.bind.find(':') != std::string::npos ? "[" + w.bind + "]" : w.bind;
   const std::string page = "http://" + host + ":" + std::to_string(port) + "/";
   std::cout << "serving " << api.size() << " loop(s) on " << page
@@ -169,21 +177,29 @@ void add_serve(CLI::App& app, int& exit_code) {
   auto* cmd = app.add_subcommand(
       "serve", "Serve the loops of data files to the workbench (a web page and its JSON API)");
   cmd->footer(
-      "Reads the files as diagnose does and answers, until Ctrl-C:\n"
+      "Reads the files as diagnose does (or a recording's loops, or records a site live) and\n"
+      "answers, until Ctrl-C:\n"
       "  GET /api/loops                          the loops: id, name, samples, sample period\n"
       "  GET /api/loops/ID/series?from=S&to=S&buckets=N   OP, PV, SP min/max per bucket\n"
       "  GET /api/loops/ID/verdict               the loop's verdict, as diagnose gives it\n"
       "  POST /api/loops/ID/jobs, GET/DELETE /api/jobs/ID   fit, diagnose, add an effect\n"
+      "       (\"validate\": the held-out share 0.05..0.6; \"last_s\": fit the latest N s)\n"
       "  GET /api/loops/ID/ladder, /diagnosis, /models/N, /models/N/simulation, /report\n"
       "  GET /api/loops/ID/phase, /models/N/signature   PV and the valve position against OP\n"
+      "  GET /api/status                         with --config: the recorder and bus counters\n"
       "  GET /                                   the workbench page (open it in a browser)\n"
       "It binds 127.0.0.1; another --bind needs --token (open the printed address with\n"
       "?token=..., or send 'Authorization: Bearer TOKEN'). It writes no file but each file's\n"
-      "model history in the state directory, as fit and diagnose do (--no-history: none),\n"
-      "and never talks to a PLC. See docs/workbench.md.\n"
+      "model history in the state directory, as fit and diagnose do (a recording's: its table\n"
+      "model_history; --no-history: none), and with --config the recording into --db. It never\n"
+      "writes to a PLC: --config only reads, as valvediag record. See docs/workbench.md.\n"
+      "Exit status 0 after Ctrl-C; 2 for bad options, files or databases; 1 when it cannot\n"
+      "listen or the recorder failed.\n"
       "Examples:\n"
       "  valvediag serve loop.csv                 (open http://127.0.0.1:8080/)\n"
       "  valvediag serve loops/*.csv --port 0     (a free port, printed)\n"
+      "  valvediag serve --db site.sqlite --loops 'FIC*' --window 2h   (recorded loops)\n"
+      "  valvediag serve --config site.toml --db site.sqlite   (record and watch live)\n"
       "  valvediag serve loop.csv --bind 0.0.0.0 --token");
   struct Args {
     std::vector<std::string> files;
@@ -191,9 +207,20 @@ void add_serve(CLI::App& app, int& exit_code) {
     WorkbenchSettings w;
     std::string op_range;
     HistoryOptions hist;
+    std::string db, config, loops, window = "4h";
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("files", a->files, "data files (CSV or .mat), one loop each")->required();
+  cmd->add_option("files", a->files, "data files (CSV or .mat), one loop each");
+  cmd->add_option("--db", a->db,
+                  "a recording (valvediag record): serve its loops' latest --window; with "
+                  "--config, record into it and serve the loops live");
+  cmd->add_option("--config", a->config,
+                  "site TOML: record its loops into --db while serving them (reads only)");
+  cmd->add_option("--loops", a->loops,
+                  "with --db: comma-separated loop names or patterns (FIC*); default: all");
+  CLI::Option* window = cmd->add_option("--window", a->window,
+                                        "with --db: the latest recorded window per loop: 30m, 4h")
+                            ->capture_default_str();
   add_layout_options(cmd, a->layout);
   add_op_range_option(cmd, a->op_range);
   cmd->add_option("--port", a->w.port, "TCP port; 0 picks a free one (printed)")
@@ -215,10 +242,43 @@ void add_serve(CLI::App& app, int& exit_code) {
   cmd->add_flag("--no-history", a->hist.off,
                 "do not add the models to each file's model history in the state directory "
                 "(the one fit, diagnose and ladder use)");
-  cmd->callback([a, &exit_code] {
+  cmd->callback([a, window, &exit_code] {
     check_workbench_bind(a->w);                      // before any data is read
     (void)split_check_shares(a->w.validate, false);  // the range check diagnose makes
     a->w.range = parse_op_range(a->op_range);
+    if (!a->config.empty() && a->db.empty())
+      throw UsageError("--config needs --db site.sqlite: the recording the workbench writes");
+    if (a->files.empty() == a->db.empty())
+      throw UsageError(
+          "give data files, or --db site.sqlite (a recording; with --config site.toml: record "
+          "it live), one of them");
+    if (a->db.empty() && (!a->loops.empty() || window->count() > 0))
+      throw UsageError("--loops and --window go with --db");
+    if (!a->db.empty()) {
+      RecordingSource src;
+      src.db = a->db;
+      src.wanted = split_names(a->loops);
+      src.window_s = duration_option("--window", a->window);
+      src.max_rows = a->layout.csv.max_rows;
+      if (a->config.empty()) {
+        run_workbench(recorded_loops_to_serve(src, a->w, a->hist), a->w);
+        exit_code = kOk;
+        return;
+      }
+      LiveRecording live(load_site_config(a->config), src, a->w, a->hist);
+      WorkbenchExtras extras;
+      extras.status = [&live] { return live.status_json(); };
+      extras.listening = [&live, &src] {
+        live.start();
+        std::cout << "recording into " << src.db << " (reads only; Ctrl-C stops)\n";
+      };
+      run_workbench(live.take_loops(), a->w, extras);
+      live.stop();  // every sample taken is stored, the run ended
+      std::cout << live.summary();
+      if (!live.error().empty()) throw std::runtime_error("the recorder stopped: " + live.error());
+      exit_code = kOk;
+      return;
+    }
     std::vector<serve::ServedLoop> loops;
     for (const auto& f : a->files) {
       DataOptions in = a->layout;
