@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -400,5 +401,55 @@ TEST_CASE(
   CHECK(table[1][1] == 2);
   CHECK(table[1][2].get<double>() == ladder[2].get<double>());
   CHECK(table[0][2].get<double>() > table[1][2].get<double>() + 20.0);
+
+  // Drag the split's edge on the trends from 30 % held out to half: on release the next job
+  // holds out that share. The whole record shown first (the split lies outside the zoom).
+  d.script("window.scrollTo(0, 0); zoomTo(wb.loop.start_s, wb.loop.end_s); return true;");
+  d.wait_for(
+      "const r = wb.charts.trend.xAxisRange(); return r[0] === wb.loop.start_s &&"
+      " r[1] === wb.loop.end_s;",
+      30.0, "the whole record on the trends");
+  CHECK(d.script("return nextShare();") == 0.3);
+  const json at = d.script(
+      "const g = wb.charts.trend, r = g.graphDiv.getBoundingClientRect(), a = g.getArea();"
+      "return [r.left + g.toDomXCoord(nextSplitTime()), r.left + g.toDomXCoord(nextSplitTime(0.5)),"
+      " r.top + a.y + a.h / 2];");
+  const auto px = [](const json& v) { return static_cast<int>(std::lround(v.get<double>())); };
+  const json range_before = d.script("return wb.charts.trend.xAxisRange();");
+  d.session_call(
+      "POST", "/actions",
+      {{"actions",
+        {{{"type", "pointer"},
+          {"id", "mouse"},
+          {"parameters", {{"pointerType", "mouse"}}},
+          {"actions",
+           {{{"type", "pointerMove"}, {"duration", 0}, {"x", px(at[0])}, {"y", px(at[2])}},
+            {{"type", "pointerDown"}, {"button", 0}},
+            {{"type", "pointerMove"}, {"duration", 300}, {"x", px(at[1])}, {"y", px(at[2])}},
+            {{"type", "pointerUp"}, {"button", 0}}}}}}}});
+  const json share = d.wait_for("return wb.validate;", 10.0, "the split dragged");
+  MESSAGE("held out after the drag: " << share.dump());
+  CHECK(share.get<double>() == doctest::Approx(0.5).epsilon(0.02));
+  CHECK(d.script("return wb.charts.trend.xAxisRange();") == range_before);  // a drag, no zoom
+  CHECK(d.script("return document.getElementById('split-info').textContent;")
+            .get<std::string>()
+            .find("(for the next jobs)") != std::string::npos);
+  // The next job, a diagnosis of model A's model, asks for that share and fits with it.
+  const std::size_t jobs_before = d.script("return wb.history.length;").get<std::size_t>();
+  const json diagnose =
+      d.session_call("POST", "/element", {{"using", "css selector"}, {"value", "#diagnose-btn"}});
+  d.session_call("POST", "/element/" + diagnose[kElement].get<std::string>() + "/click");
+  d.wait_for("return wb.history.length > " + std::to_string(jobs_before) + " && " + idle + ";",
+             120.0, "the diagnosis with the dragged split");
+  CHECK(d.script("return wb.jobs[wb.jobs.length - 1].validate;") == share);
+  const json used = d.session_call(
+      "POST", "/execute/async",
+      {{"script",
+        "const done = arguments[arguments.length - 1];"
+        "fetch('/api/loops/0/diagnosis').then((r) => r.json()).then((j) => done(j.data));"},
+       {"args", json::array()}});
+  INFO(used.dump());
+  CHECK(used["validate"] == share);
+  CHECK(used["samples"] == 1500);
   CHECK(server.stop() == 0);
 }

@@ -16,6 +16,10 @@ const wb = {
   xy: {},           // the phase plots as last drawn: {points, series, message}
   window: null,     // [from, to] zoomed, null: the whole record
   history: [],      // the jobs this page ran, how each ended
+  validate: null,   // the held-out share the next jobs ask for, once the split was dragged
+  dragShare: null,  // the share under the mouse while the split's edge is dragged
+  jobs: [],         // the request bodies of the jobs this page started
+  status: null,     // the live recording's status (/api/status)
 };
 window.wb = wb;  // for the browser test and the curious
 
@@ -75,6 +79,12 @@ async function loadLoops() {
   if (wb.loops.length > 0) selectLoop(wb.loops[0].id);
 }
 
+function loopInfo(l) {
+  return (l.live ? 'recording ' : l.source.split('/').pop() + ': ') + l.samples + ' samples every ' +
+    fmt(l.sample_period_s, 2) + ' s, t ' + fmt(l.start_s, 0) + ' to ' + fmt(l.end_s, 0) + ' s' +
+    (l.start_clock ? ' (from ' + l.start_clock + ')' : '');
+}
+
 async function selectLoop(id) {
   wb.loop = wb.loops.find((l) => l.id === id);
   wb.ladder = [];
@@ -86,19 +96,27 @@ async function selectLoop(id) {
   $('empty').hidden = true;
   $('view').hidden = false;
   $('loop-name').textContent = wb.loop.name;
-  $('loop-info').textContent = wb.loop.source.split('/').pop() + ': ' + wb.loop.samples + ' samples every ' +
-    fmt(wb.loop.sample_period_s, 2) + ' s, t ' + fmt(wb.loop.start_s, 0) + ' to ' + fmt(wb.loop.end_s, 0) + ' s' +
-    (wb.loop.start_clock ? ' (from ' + wb.loop.start_clock + ')' : '');
+  $('loop-info').textContent = loopInfo(wb.loop);
+  showSplitInfo();
   $('report-link').href = '/api/loops/' + id + '/report';
   showError('');
-  loadVerdict(id);
-  await drawTrends();
+  if (!wb.loop.live) loadVerdict(id);
+  else {  // a live loop's data grows: judged when asked, on the recording so far
+    $('verdict').textContent = 'judge the recording so far';
+    $('verdict').className = 'verdict ask';
+    $('stiction-size').textContent = $('verdict-reason').textContent = '';
+  }
+  if (wb.loop.samples > 0) await drawTrends();
   await loadLadder();
   await loadDiagnosis();
   // A loop opened for the first time: diagnose the linear model, so that there is a model to
-  // compare and findings to act on.
-  if (wb.ladder.length === 0 && !wb.job) runJob({ action: 'diagnose' }, 'diagnosing the linear model');
+  // compare and findings to act on (a live one when asked: it may hold a few samples yet).
+  if (wb.ladder.length === 0 && !wb.job && !wb.loop.live) runJob({ action: 'diagnose' }, 'diagnosing the linear model');
 }
+
+$('verdict').onclick = () => {
+  if (wb.loop && wb.loop.live && !$('verdict').textContent.startsWith('computing')) loadVerdict(wb.loop.id);
+};
 
 async function loadVerdict(id) {
   $('verdict').textContent = 'computing…';
@@ -151,14 +169,48 @@ function merge(coarse, fine, from, to) {
   return coarse.filter((r) => r[0] < from).concat(fine, coarse.filter((r) => r[0] > to));
 }
 
+// Model A's split: where its own held-out part starts.
 function splitTime() {
   const step = wb.shown;
   if (step && step.estimation_end_s !== null) return step.estimation_end_s;
-  return wb.loop.start_s + (1 - 0.3) * (wb.loop.end_s - wb.loop.start_s);  // diagnose's 30 %
+  return nextSplitTime();
 }
 
-function shadeSplit(canvas, area, g) {
-  const x0 = g.toDomXCoord(splitTime()), left = area.x, right = area.x + area.w;
+// The held-out share the next jobs use: dragged, or the server's (--validate).
+function nextShare() {
+  return wb.dragShare ?? wb.validate ?? wb.loop.validate;
+}
+
+// Where the next jobs' held-out part starts: the last share of the part the models are fitted to
+// (after a quiet lead-in), on evenly spaced samples.
+function nextSplitTime(share = nextShare()) {
+  const l = wb.loop, a = l.analysed_start_s ?? l.start_s;
+  return a + (1 - share) * (l.end_s - a);
+}
+
+function shareAt(t) {
+  const l = wb.loop, a = l.analysed_start_s ?? l.start_s;
+  const share = (l.end_s - t) / Math.max(1e-9, l.end_s - a);
+  return Math.round(Math.min(0.6, Math.max(0.05, share)) * 1000) / 1000;  // the API's bounds
+}
+
+function showSplitInfo() {
+  const share = nextShare();
+  $('split-info').textContent = 'held out: ' + fmt(100 * share, 1) + ' %' +
+    (wb.validate === null && wb.dragShare === null ? ' (the server\'s)' : ' (for the next jobs)');
+}
+
+// The trends: the next jobs' split, with its edge marked where it can be dragged.
+function shadeNextSplit(canvas, area, g) {
+  shadeSplit(canvas, area, g, nextSplitTime());
+  const x0 = g.toDomXCoord(nextSplitTime());
+  if (x0 <= area.x || x0 >= area.x + area.w) return;
+  canvas.fillStyle = wb.dragShare !== null ? '#9a7b1c' : 'rgba(154, 123, 28, 0.6)';
+  canvas.fillRect(x0 - 1.5, area.y, 3, area.h);
+}
+
+function shadeSplit(canvas, area, g, at = splitTime()) {
+  const x0 = g.toDomXCoord(at), left = area.x, right = area.x + area.w;
   if (x0 >= right) return;  // the window shows estimation data only
   canvas.fillStyle = 'rgba(255, 214, 102, 0.22)';
   canvas.fillRect(Math.max(x0, left), area.y, right - Math.max(x0, left), area.h);
@@ -212,12 +264,13 @@ async function drawTrends() {
   const names = ['op', 'pv', 'sp'].filter((n) => l.signals.includes(n));
   if (!wb.charts.trend) {
     wb.charts.trend = makeChart(div, ['t (s)'].concat(names.map((n) => n.toUpperCase())),
-      ['#1f77b4', '#d62728', '#2ca02c'].slice(0, names.length), { underlayCallback: shadeSplit });
+      ['#1f77b4', '#d62728', '#2ca02c'].slice(0, names.length), { underlayCallback: shadeNextSplit });
+    dragSplit(div);
   }
   const id = l.id;
-  if (!wb.window || !wb.trendCoarse || wb.trendCoarse.id !== id) {
+  if (!wb.window || !wb.trendCoarse || wb.trendCoarse.id !== id || wb.trendCoarse.samples !== l.samples) {
     const whole = await api('/api/loops/' + id + '/series?buckets=' + bucketsFor(div));
-    wb.trendCoarse = { id, rows: barRows(whole, names) };
+    wb.trendCoarse = { id, samples: l.samples, rows: barRows(whole, names) };
   }
   let rows = wb.trendCoarse.rows;
   if (wb.window) {
@@ -364,6 +417,44 @@ $('model-b').onchange = (ev) => {
   loadLadder();
 };
 
+// ---- the split: its edge on the trends dragged; on release the next jobs hold out that share ----
+
+function dragSplit(div) {
+  const g = () => wb.charts.trend;
+  const xOf = (ev) => ev.clientX - g().graphDiv.getBoundingClientRect().left;
+  const near = (ev) => {
+    const area = g().getArea(), x = xOf(ev), x0 = g().toDomXCoord(nextSplitTime());
+    return x0 > area.x && x0 < area.x + area.w && Math.abs(x - x0) <= 6;
+  };
+  // Capture: seen before dygraphs' own handlers, so a drag of the edge is no zoom.
+  div.addEventListener('mousedown', (ev) => {
+    if (!wb.loop || wb.loop.samples === 0 || !near(ev)) return;
+    ev.stopPropagation();
+    ev.preventDefault();
+    wb.dragShare = nextShare();
+    const move = (e) => {
+      wb.dragShare = shareAt(g().toDataXCoord(xOf(e)));
+      showSplitInfo();
+      g().updateOptions({});
+    };
+    const up = (e) => {
+      window.removeEventListener('mousemove', move, true);
+      window.removeEventListener('mouseup', up, true);
+      move(e);
+      wb.validate = wb.dragShare;
+      wb.dragShare = null;
+      showSplitInfo();
+      g().updateOptions({});
+      drawPhasePlots();  // PV against OP coloured by the new split
+    };
+    window.addEventListener('mousemove', move, true);
+    window.addEventListener('mouseup', up, true);
+  }, true);
+  div.addEventListener('mousemove', (ev) => {
+    if (wb.charts.trend && wb.loop) div.classList.toggle('near-split', wb.dragShare !== null || near(ev));
+  });
+}
+
 // ---- phase plots: the valve signature and PV against OP, paths drawn on a canvas -------------
 // (dygraphs draws y against an ascending x; a cycle goes back and forth in OP)
 
@@ -394,8 +485,11 @@ async function drawPhasePlots() {
   const l = wb.loop, a = wb.shown, b = wb.compare;
   const seq = (wb.phaseSeq = (wb.phaseSeq || 0) + 1);
   const range = wb.window ? '&from=' + wb.window[0] + '&to=' + wb.window[1] : '';
-  const get = (path, canvas) => api('/api/loops/' + l.id + path + '?points=' + pathPoints($(canvas)) + range)
+  const split = '&validate=' + nextShare();  // PV against OP: the next jobs' split
+  const get = (path, canvas) => api('/api/loops/' + l.id + path + '?points=' + pathPoints($(canvas)) + range +
+    (path === '/phase' ? split : ''))
     .catch((e) => ({ error: e.message }));
+  if (l.samples === 0) return;
   const [phase, sa, sb] = await Promise.all([
     get('/phase', 'phase-chart'),
     a && a.valve_effect ? get('/models/' + a.step + '/signature', 'signature-chart') : null,
@@ -675,6 +769,14 @@ function setBusy(busy) {
 // Starts a job on the loop shown and follows it; `rediagnose`: diagnose the new model after it.
 async function runJob(body, text, rediagnose = false) {
   const id = wb.loop.id;
+  // The split dragged, and "fit the last N minutes": every job the page starts uses them.
+  if (wb.validate !== null) body.validate = wb.validate;
+  const minutes = Number($('last-min').value);
+  if ($('last-on').checked && minutes > 0) {
+    body.last_s = minutes * 60;
+    text += ' (the last ' + minutes + ' min)';
+  }
+  wb.jobs.push(body);
   showError('');
   setBusy(true);
   let job;
@@ -729,7 +831,46 @@ $('remove-btn').onclick = () => {
 };
 $('diagnose-btn').onclick = () => runJob({ action: 'diagnose' }, 'diagnosing ' + (wb.shown ? wb.shown.model : 'linear'));
 
+// ---- live: the recording grows; the trends and the bus status follow it ------------------------
+
+async function pollLive() {
+  if (!wb.loops.some((l) => l.live)) return;
+  try {
+    const [loops, st] = await Promise.all([api('/api/loops'), api('/api/status')]);
+    wb.status = st;
+    showLive(st);
+    for (const l of loops.loops) {
+      const li = document.querySelector('#loop-list li[data-id="' + l.id + '"] .muted');
+      if (li) li.textContent = l.samples + ' samples, ' + fmt(l.sample_period_s, 2) + ' s';
+      const i = wb.loops.findIndex((x) => x.id === l.id);
+      if (i >= 0) wb.loops[i] = l;
+    }
+    const now = wb.loop && wb.loops.find((l) => l.id === wb.loop.id);
+    if (now && now.samples !== wb.loop.samples) {
+      wb.loop = now;
+      $('loop-info').textContent = loopInfo(now);
+      if (wb.dragShare === null) await drawTrends();  // not under a drag of the split
+    }
+  } catch (e) {
+    $('live-text').textContent = ' (the server did not answer: ' + e.message + ')';
+  }
+  setTimeout(pollLive, 1000);
+}
+
+function showLive(st) {
+  $('live').hidden = false;
+  $('live').classList.toggle('stopped', !st.recording);
+  $('live-db').textContent = st.db + ' (run ' + st.run + ')';
+  const ms = (s) => fmt(1000 * s, 1) + ' ms';
+  const buses = st.buses.map((b) => 'bus ' + b.name + (b.connected ? ' up' : ' DOWN') + ': ' + b.requests +
+    ' requests, ' + b.errors + ' errors, ' + b.reconnects + ' reconnects' +
+    (b.last_error ? ' (' + b.last_error + ')' : ''));
+  $('live-text').textContent = (st.recording ? '' : ' stopped' + (st.error ? ': ' + st.error : '') + '; ') +
+    ' ' + st.stored + ' samples stored, ' + st.bad_rows + ' with errors, ' + st.missed + ' missed; lateness p50 ' +
+    ms(st.lateness_p50_s) + ', p99 ' + ms(st.lateness_p99_s) + '; ' + buses.join('; ');
+}
+
 // The token came in the address (?token=): the cookie carries it now, the address bar need not.
 if (location.search.includes('token=')) history.replaceState(null, '', location.pathname);
 document.body.dataset.job = 'idle';
-loadLoops().catch((e) => showError('Could not read the loops: ' + e.message));
+loadLoops().then(pollLive).catch((e) => showError('Could not read the loops: ' + e.message));
