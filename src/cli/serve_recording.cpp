@@ -1,6 +1,7 @@
 // The workbench's loops from a recording: `serve --db` (each loop's latest window, as a sweep
 // reads it) and `serve --config --db` (the recorder runs in the server and the loops grow as it
 // records). The recorder only reads from the PLC (bus.hpp has no write).
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -49,7 +50,6 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
   std::vector<serve::ServedLoop> loops;
   for (const auto& name : names) {
     if (!selected(src.wanted, name)) continue;
-    const std::string leave_out = "; leave it out with --loops (the recorded loops: ";
     std::optional<RecordedLoop> r;
     try {
       r = read_latest_window(src.db, name, src.window_s, src.max_rows);
@@ -64,6 +64,11 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
                        " has no samples to serve; record it first (valvediag record), or leave "
                        "it out with --loops");
     std::vector<std::string> notes = r->notes;
+    // Short gaps bridged (read_recorded_loop's note): `ladder --db` reads ranges without
+    // bridging, so it cannot read these samples back to find their history.
+    const bool bridged = std::any_of(notes.begin(), notes.end(), [](const std::string& n) {
+      return n.find("filled by linear interpolation") != std::string::npos;
+    });
     LoopData d = std::move(r->data);
     // The history `fit --db site.sqlite --loop NAME --from A --to B` keeps for these samples:
     // the recording's table model_history (the state directory when the file cannot take it).
@@ -92,9 +97,13 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
     std::cout << "loop " << name << ": run " << r->run << ", t "
               << loops.back().snapshot->data.t.front() << " to "
               << loops.back().snapshot->data.t.back() << " s";
-    if (!where.empty())
+    if (!where.empty() && !bridged)
       std::cout << "; model history: " << where << " (valvediag ladder --db " << src.db
                 << " --loop " << name << range << ")";
+    else if (!where.empty())
+      std::cout << "; model history: " << where << ", run " << r->run << ", reading '"
+                << range.substr(range.empty() ? 0 : 1)
+                << "' (gaps bridged: valvediag ladder --db cannot read these samples)";
     std::cout << "\n";
   }
   return loops;
