@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <optional>
@@ -245,6 +246,15 @@ void add_serve(CLI::App& app, int& exit_code) {
   cmd->callback([a, window, &exit_code] {
     check_workbench_bind(a->w);                      // before any data is read
     (void)split_check_shares(a->w.validate, false);  // the range check diagnose makes
+    // The page's jobs may move the split within the API's bounds: the server's share too.
+    if (a->w.validate > serve::kMaxJobValidate) {
+      char b[160];
+      std::snprintf(b, sizeof b,
+                    "--validate %g: the workbench holds out at most %g of a record (its page "
+                    "moves the split within that); give less",
+                    a->w.validate, serve::kMaxJobValidate);
+      throw UsageError(b);
+    }
     a->w.range = parse_op_range(a->op_range);
     if (!a->config.empty() && a->db.empty())
       throw UsageError("--config needs --db site.sqlite: the recording the workbench writes");

@@ -305,6 +305,12 @@ json run_job(const JobRequest& req, std::shared_ptr<const LoopData> whole, LoopM
   check_identifiable_data(d, 200, "model " + to_string(spec));
   ModelFitOptions mo = opt.fit_options();
   mo.cancel = control.cancel_flag();
+  // An effect added to the last model, on the same samples and split: that fit starts and bounds
+  // the new one's search (ModelFitOptions::extends), as fit --add's does.
+  if (req.action == "add" && replaced.empty() && current && spec != base &&
+      current->validate == opt.validate && current->data && current->data->op == d.op &&
+      current->data->pv == d.pv)
+    mo.extends = &current->fit;
   control.report(0.05, "fitting " + to_string(spec));
   ModelFit f = fit_model(d.op, d.pv, Ts, spec, mo);
   if (f.status == ModelFitStatus::NoStableModel)

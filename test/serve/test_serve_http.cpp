@@ -214,6 +214,11 @@ TEST_CASE("serve refuses a non-loopback --bind without --token, and bad options"
   CHECK(r.status == 2);
   r = run_cli(VALVEDIAG_BIN, {"serve"}, kTmp, 30.0);
   CHECK(r.status == 2);
+  // A held-out share the page's split could not reach (the API takes 0.05 to 0.6).
+  r = run_cli(VALVEDIAG_BIN, {"serve", csv.string(), "--port", "0", "--validate", "0.7"}, kTmp,
+              30.0);
+  CHECK(r.status == 2);
+  CHECK(r.out.find("--validate 0.7: the workbench holds out at most 0.6") != std::string::npos);
 }
 
 TEST_CASE("serve over HTTP: the page, a job, bad bodies, a client that hangs up") {
