@@ -17,6 +17,7 @@
 
 #include "../bus/bus_test_util.hpp"
 #include "../common/run_cli.hpp"
+#include "../common/sqlite_exec.hpp"
 #include "valvediag/drivers/sim_plc.hpp"
 
 using namespace valvediag;
@@ -55,23 +56,7 @@ std::string write_site(const std::string& name, int port, double period,
 }
 
 double scalar(const std::string& db, const std::string& sql, std::string* text = nullptr) {
-  sqlite3* c = nullptr;
-  if (sqlite3_open_v2(db.c_str(), &c, SQLITE_OPEN_READWRITE, nullptr) != SQLITE_OK) {
-    sqlite3_close(c);
-    return std::nan("");
-  }
-  sqlite3_busy_timeout(c, 2000);
-  sqlite3_stmt* s = nullptr;
-  double v = std::nan("");
-  if (sqlite3_prepare_v2(c, sql.c_str(), -1, &s, nullptr) == SQLITE_OK &&
-      sqlite3_step(s) == SQLITE_ROW) {
-    v = sqlite3_column_double(s, 0);
-    if (text && sqlite3_column_text(s, 0))
-      *text = reinterpret_cast<const char*>(sqlite3_column_text(s, 0));
-  }
-  sqlite3_finalize(s);
-  sqlite3_close(c);
-  return v;
+  return test::query_scalar(db, sql, text, false);
 }
 
 double wall_now() {
