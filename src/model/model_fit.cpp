@@ -123,6 +123,22 @@ struct Search {
     return v;
   }
   const std::atomic<bool>* cancel = nullptr;  // ModelFitOptions::cancel
+  // ModelFitOptions::progress: the stage under way fills [stage_lo, stage_hi) of the search as
+  // its evaluations reach its budget; the share reported only rises (in steps of a hundredth).
+  const std::function<void(double, const std::string&)>* progress = nullptr;
+  double span_lo = 0.0, span_hi = 1.0;  // the share of the search the caller gives a stage
+  double stage_lo = 0.0, stage_hi = 0.0, reported = -1.0;
+  int stage_first = 0, stage_budget = 1;
+  std::string stage_name;
+  void stage(double lo, double hi, int budget, std::string name) {
+    if (!progress || !*progress) return;
+    const std::lock_guard<std::mutex> lock(mtx);
+    stage_lo = lo;
+    stage_hi = hi;
+    stage_first = evaluations.load();
+    stage_budget = std::max(1, budget);
+    stage_name = std::move(name);
+  }
   // The linear part's error per valve position, remembered: the grid and the polishes revisit
   // positions (a stick-slip valve's moves only where a slip does; 38 % of the fits of a
   // 4,000-sample climb were repeats). The fit depends on the position alone.
@@ -195,6 +211,15 @@ struct Search {
     if (c < best_cost) {
       best_cost = c;
       best_z = zc;
+    }
+    if (progress && *progress) {
+      const double done =
+          std::min(1.0, static_cast<double>(evaluations.load() - stage_first) / stage_budget);
+      const double share = stage_lo + (stage_hi - stage_lo) * done;
+      if (share >= reported + 0.01) {
+        reported = share;
+        (*progress)(share, stage_name);
+      }
     }
     return c;
   }
@@ -305,17 +330,23 @@ nlopt_result search_space(Search& s, const ModelFitOptions& opt,
   if (points == 0) points = dim == 1 ? 41 : dim == 2 ? 21 : dim == 3 ? 9 : 6;
   std::vector<std::vector<double>> starts;
   double step = 0.05;
+  const double lo = s.span_lo, hi = s.span_hi, mid = lo + 0.5 * (hi - lo);
   if (opt.global == GlobalSearch::Grid && std::pow(points, dim) <= 5000) {
+    const int total = static_cast<int>(std::pow(points, dim));
+    s.stage(lo, mid, total, "valve parameters: a grid of " + std::to_string(total) + " points");
     const auto costs = grid_search(s, points, opt.threads);
     starts = grid_starts(costs, s.dim(), points, std::max(1, opt.polish_starts));
     step = 0.5 / (points - 1);
   } else {
+    s.stage(lo, mid, n_global, "valve parameters: a global search (DIRECT-L)");
     std::vector<double> z(s.dim(), 0.5);
     run_nlopt(NLOPT_GN_DIRECT_L, s, z, n_global, 0.0);
     starts.push_back(s.restrict_to_active(s.best_z));
   }
   if (start) starts.push_back(s.restrict_to_active(*start));
   // Independent polishes, one per start, on the cores.
+  s.stage(mid, hi, n_local * static_cast<int>(starts.size()),
+          "valve parameters: polishing from " + std::to_string(starts.size()) + " starts");
   std::vector<nlopt_result> results(starts.size(), NLOPT_SUCCESS);
   std::vector<double> ends(starts.size(), std::numeric_limits<double>::infinity());
   parallel_for(
@@ -804,16 +835,25 @@ nlopt_result search_valve(Search& s, const ModelFitOptions& opt,
   if (s.effects.size() > 1) {
     s.base = neutral_point(s);
     // Two passes: an effect fitted with the others still at rest can take a wrong basin.
-    for (std::size_t pass = 0; pass < 2 * s.effects.size(); ++pass)
+    const std::size_t passes = 2 * s.effects.size();
+    const double parts = static_cast<double>(passes + (start ? 2 : 1));
+    for (std::size_t pass = 0; pass < passes; ++pass) {
+      s.span_lo = static_cast<double>(pass) / parts;
+      s.span_hi = static_cast<double>(pass + 1) / parts;
       search_effect(s, pass % s.effects.size(), opt);
+    }
     s.active = s.searched();
     std::vector<double> zj = s.restrict_to_active(s.base);
     const int n_local =
         opt.local_evaluations > 0 ? opt.local_evaluations : 60 * static_cast<int>(s.coords.size());
+    s.stage(static_cast<double>(passes) / parts, static_cast<double>(passes + 1) / parts, n_local,
+            "valve parameters: all effects polished together");
     double end = 0.0;
     nlopt_result r =
         run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, &end, 0.02).result;
     if (start) {  // a second joint polish, from the extended model's point (s.best_z: the better)
+      s.stage((parts - 1.0) / parts, 1.0, n_local,
+              "valve parameters: polished again from the model this one extends");
       double end_start = 0.0;
       s.base = *start;
       std::vector<double> zs = s.restrict_to_active(*start);
@@ -958,6 +998,8 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
   fit.stop_reason = "no valve parameters to search";
   std::optional<LinearFit> final_fit;  // the output-error fit of the final z, when made below
   if (!s.coords.empty()) {
+    s.progress = &opt.progress;
+    s.span_hi = p.delay_window() ? 0.5 : 1.0;  // a second search around a long dead time after
     const std::optional<std::vector<double>> ze =
         opt.extends && opt.extends->x_hat.size() == u.size() ? extended_point(s, *opt.extends)
                                                              : std::nullopt;
@@ -973,6 +1015,9 @@ ModelFit fit_separable(const std::vector<double>& u, const std::vector<double>& 
       const StructureRange& r = p.narrow_lo->range;
       if (first.ok && first.structure.nk > r.nk_max) {
         Search& again = p.around_delay(u, y, first.structure.nk, opt);
+        again.progress = &opt.progress;
+        again.span_lo = 0.5;
+        again.reported = s.reported;
         const nlopt_result second = search_valve(again, opt);
         const LinearFit f = est.fit(again.valve_position(again.best_z.data()), false);
         if (f.ok && f.sse < first.sse) {
@@ -1176,7 +1221,8 @@ std::vector<ModelFit> fit_models(const std::vector<double>& u, const std::vector
                                  const std::function<void(std::size_t)>& each_done) {
   std::vector<ModelFit> out(specs.size());
   ModelFitOptions one = opt;
-  one.threads = 1;  // the parallelism is across the specs
+  one.threads = 1;    // the parallelism is across the specs
+  one.progress = {};  // fits side by side: each_done reports them
   std::mutex reporting;
   std::size_t done = 0;
   parallel_for(specs.size(), worker_count(opt.threads, specs.size()), [&](unsigned, std::size_t k) {

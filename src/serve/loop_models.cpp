@@ -311,7 +311,11 @@ json run_job(const JobRequest& req, std::shared_ptr<const LoopData> whole, LoopM
       current->validate == opt.validate && current->data && current->data->op == d.op &&
       current->data->pv == d.pv)
     mo.extends = &current->fit;
-  control.report(0.05, "fitting " + to_string(spec));
+  const std::string fitting = "fitting " + to_string(spec);
+  control.report(0.05, fitting);
+  mo.progress = [&control, &fitting](double share, const std::string& stage) {
+    control.report(0.05 + 0.9 * share, fitting + ": " + stage);
+  };
   ModelFit f = fit_model(d.op, d.pv, Ts, spec, mo);
   if (f.status == ModelFitStatus::NoStableModel)
     throw std::invalid_argument("no stable model " + to_string(spec) +

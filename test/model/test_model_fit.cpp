@@ -575,6 +575,34 @@ TEST_CASE("preisach: position-dependent friction on the asymmetric valve" *
   CHECK(pv > hv + 1.0);
 }
 
+TEST_CASE("a fit reports its valve search's progress, rising to the end, and the same fit") {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 2000);
+  for (const char* spec : {"stiction", "stiction+actuator-lag"}) {
+    CAPTURE(spec);
+    std::vector<std::pair<double, std::string>> calls;
+    ModelFitOptions o = split();
+    o.progress = [&calls](double share, const std::string& stage) {
+      calls.emplace_back(share, stage);
+    };
+    const ModelFit with = fit(d, spec, o);
+    const ModelFit without = fit(d, spec, split());
+    CHECK(with.fitness_percent == without.fitness_percent);  // reporting changes nothing
+    REQUIRE(calls.size() >= 10);
+    bool rising = true, grid = false, polish = false;
+    for (std::size_t k = 0; k < calls.size(); ++k) {
+      rising = rising && (k == 0 || calls[k].first > calls[k - 1].first);
+      grid = grid || calls[k].second.find("a grid of") != std::string::npos;
+      polish = polish || calls[k].second.find("polish") != std::string::npos;
+    }
+    CHECK(rising);
+    CHECK(grid);
+    CHECK(polish);
+    CHECK(calls.front().first < 0.2);
+    CHECK(calls.back().first > 0.6);  // polishes that converge early end short of 1
+    CHECK(calls.back().first <= 1.0);
+  }
+}
+
 TEST_CASE("fit_models runs independent fits in parallel with the same results") {
   const LoopData d = scenario_data("stenman", 2);
   const std::vector<ModelSpec> specs = {parse_model_spec("linear"), parse_model_spec("deadband"),

@@ -99,12 +99,17 @@ struct Api {
     REQUIRE_MESSAGE(r.status == 202, r.body.dump());
     return r.body["job"];
   }
+  // The phases a running job reported, as the polls below saw them.
+  mutable std::vector<std::string> phases;
   json wait(const std::string& id, double limit_s = 900.0) const {
     const auto end = Clock::now() + std::chrono::duration<double>(limit_s);
+    phases.clear();
     for (;;) {
       const auto r = get("/api/jobs/" + id);
       REQUIRE(r.status == 200);
       const std::string s = r.body["state"];
+      if (s == "running" && r.body.contains("phase") && r.body["phase"].is_string())
+        phases.push_back(r.body["phase"]);
       if (s != "queued" && s != "running") return r.body;
       REQUIRE_MESSAGE(Clock::now() < end, "job " << id << " still " << s);
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -217,6 +222,10 @@ TEST_CASE("jobs: diagnose finds the hidden stiction, adding it raises the valida
   REQUIRE_MESSAGE(add["state"] == "done", add.dump());
   CHECK(add["result"]["model"] == "stiction");
   CHECK(add["result"]["step"] == 1);
+  // The fit reported its valve search while it ran, not only its start and end.
+  CHECK(std::any_of(a.phases.begin(), a.phases.end(), [](const std::string& p) {
+    return p.find("fitting stiction: valve parameters") != std::string::npos;
+  }));
 
   const json lad = a.get("/api/loops/0/ladder").body;
   REQUIRE(lad["steps"].size() == 2);

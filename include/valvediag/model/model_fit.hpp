@@ -71,6 +71,12 @@ struct ModelFitOptions {
   // worse than the one it extends (a search of more coordinates on a coarser grid can miss the
   // narrower model's basin). nullptr: the search starts from every effect at rest.
   const ModelFit* extends = nullptr;
+  // Called as the valve search goes (one call at a time, from the fit's threads): the share of
+  // it done, rising to 1, and what it is doing. A stage's share fills as its evaluations reach its
+  // budget (a grid's points; a polish's most evaluations), so a polish that converges early
+  // jumps to the next stage. Not called by fit_models (its fits run side by side) nor for the
+  // Preisach weights (the core's identification).
+  std::function<void(double, const std::string&)> progress;
   // Set by another thread: the fit throws Cancelled (core/cancel.hpp) at its next valve-search
   // evaluation or identify() structure. Every trial fit of a diagnosis shares DiagnoseOptions::fit.
   const std::atomic<bool>* cancel = nullptr;
