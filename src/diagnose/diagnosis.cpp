@@ -128,7 +128,7 @@ std::string explain(const std::string& effect, const ModelFit& trial,
                      static_cast<double>(trial.structure.nk + 1));
   if (effect == "order") {
     const double lag = param(p, "extra_lag", 0.0);
-    if (lag > 0)
+    if (lag >= 0.5)  // a lag that prints as "about 0 s" is the wider orders alone
       return strprintf(
           "the process has more lags than modelled (an extra lag of about %.0f s, na = %.0f, "
           "nb = %.0f): add `order` (or check for a slow actuator: the data cannot tell "

@@ -79,6 +79,16 @@ async function loadLoops() {
   if (wb.loops.length > 0) selectLoop(wb.loops[0].id);
 }
 
+
+// A long loop name (2_CDU.7040-311_FIC31102) wraps after its separators, not inside a word: the
+// text node split after each _ . - with a <wbr> between (its textContent stays the name).
+function setBreakable(node, text) {
+  node.replaceChildren();
+  text.split(/(?<=[_.\-])/).forEach((part, i) => {
+    if (i > 0) node.appendChild(document.createElement('wbr'));
+    node.appendChild(document.createTextNode(part));
+  });
+}
 function loopInfo(l) {
   return (l.live ? 'recording ' : l.source.split('/').pop() + ': ') + l.samples + ' samples every ' +
     fmt(l.sample_period_s, 2) + ' s, t ' + fmt(l.start_s, 0) + ' to ' + fmt(l.end_s, 0) + ' s' +
@@ -95,7 +105,7 @@ async function selectLoop(id) {
   for (const li of $('loop-list').children) li.classList.toggle('selected', Number(li.dataset.id) === id);
   $('empty').hidden = true;
   $('view').hidden = false;
-  $('loop-name').textContent = wb.loop.name;
+  setBreakable($('loop-name'), wb.loop.name);
   $('loop-info').textContent = loopInfo(wb.loop);
   showSplitInfo();
   $('report-link').href = '/api/loops/' + id + '/report';
