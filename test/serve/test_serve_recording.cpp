@@ -154,11 +154,28 @@ TEST_CASE("serve --db: the recorded loops, their models in the recording's model
     CHECK(loops[0]["name"] == "FIC101");
     CHECK(loops[1]["name"] == "LIC201");
     CHECK(loops[0]["live"] == false);
-    // 3 s at 5 ms: about 600 samples (a missed first tick leaves the longest clean stretch).
-    CHECK(loops[0]["samples"].get<int>() >= 550);
+    // 3 s at 5 ms: about 600 samples, the longest clean stretch. A missed first tick leaves 599;
+    // on a loaded machine (CI's tests side by side) ticks missed later split the record, and the
+    // longest stretch is served: at least a few hundred samples.
+    const std::string fic = "(SELECT id FROM loops WHERE name = 'FIC101')";
+    const double holes =
+        scalar(db,
+               "SELECT max(tick) + 1 - count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 "
+               "AND loop_id = " +
+                   fic) +
+        scalar(db, "SELECT count(*) FROM gaps WHERE loop_id = " + fic);
+    INFO("ticks missed or flagged: " << holes);
+    CHECK(loops[0]["samples"].get<int>() >= (holes <= 1 ? 550 : 200));
     CHECK(loops[0]["samples"].get<int>() <= 600);
     CHECK(loops[0]["sample_period_s"].get<double>() == doctest::Approx(0.005));
-    CHECK(loops[1]["samples"].get<int>() >= 270);
+    const std::string lic = "(SELECT id FROM loops WHERE name = 'LIC201')";
+    const double lic_holes =
+        scalar(db,
+               "SELECT max(tick) + 1 - count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 "
+               "AND loop_id = " +
+                   lic) +
+        scalar(db, "SELECT count(*) FROM gaps WHERE loop_id = " + lic);
+    CHECK(loops[1]["samples"].get<int>() >= (lic_holes <= 1 ? 270 : 100));
     const json series = get(c, "/api/loops/0/series?buckets=3");
     CHECK(series["samples"] == loops[0]["samples"]);
     CHECK(series["op"]["max"].size() == 3);
