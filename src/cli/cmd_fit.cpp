@@ -135,9 +135,10 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const Hi
   mo.validation_start = fo.validation_start;
   // Effects only added to the last model: that model, fitted again as it was, starts the new
   // one's search and bounds it (ModelFitOptions::extends), so adding an effect never fits the
-  // estimation part worse than the model it was added to.
+  // estimation part worse than the model it was added to. Not the Preisach weights: their
+  // identification takes no start, so fitting them again would be time lost.
   std::optional<ModelFit> extended;
-  if (last && *last != spec &&
+  if (last && *last != spec && !last->has("preisach") &&
       std::all_of(last->effects.begin(), last->effects.end(), [&spec](const EffectSpec& e) {
         const EffectSpec* in = spec.find(e.name);
         return in && *in == e;
