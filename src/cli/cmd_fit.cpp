@@ -100,8 +100,7 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const Hi
     spec = parse_model_spec(a.model);
   } else {
     const auto h = load_history_at(history);
-    if (!h.empty()) spec = parse_model_spec(h.back().model);
-    if (!h.empty()) last = spec;
+    if (!h.empty()) last = spec = parse_model_spec(h.back().model);
     std::cout << "note: starting from the last model of this data: " << to_string(spec)
               << (h.empty() ? " (no history yet)" : "") << "\n";
   }

@@ -770,7 +770,7 @@ LinearFit ArxEstimator::refine(const LinearFit& ls, const std::vector<double>& x
 }
 
 LinearFit ArxEstimator::fit_output_error(const std::vector<double>& x, int iterations) const {
-  if (iterations <= 0 || opt_.drift) return fit(x, true);
+  if (opt_.drift || iterations <= 0) return fit(x, true);
   const Gram g = x_blocks(x);
   const auto& r = opt_.range;
   std::vector<LinearFit> fits;
@@ -799,15 +799,14 @@ LinearFit ArxEstimator::fit_from(const LinearFit& start, const std::vector<doubl
                                  int iterations) const {
   const auto& r = opt_.range;
   const ArxStructure& st = start.structure;
-  if (x.size() != y_.size() || static_cast<int>(start.a.size()) != st.na ||
-      static_cast<int>(start.b.size()) != st.nb || st.na > r.na_max || st.nb < 1 ||
-      st.nk < r.nk_min || st.nk + st.nb > r.nk_max + r.nb_max)
+  if (x.size() != y_.size() || !start.drift_knots.empty() ||
+      static_cast<int>(start.a.size()) != st.na || static_cast<int>(start.b.size()) != st.nb ||
+      st.na > r.na_max || st.nb < 1 || st.nk < r.nk_min || st.nk + st.nb > r.nk_max + r.nb_max)
     return {};
   LinearFit f;
   f.structure = st;
   f.a = start.a;
   f.b = start.b;
-  if (!start.drift_knots.empty()) return {};
   if (opt_.drift)
     f.drift_knots.assign(knots_, start.c);
   else

@@ -836,23 +836,29 @@ nlopt_result search_valve(Search& s, const ModelFitOptions& opt,
     s.base = neutral_point(s);
     // Two passes: an effect fitted with the others still at rest can take a wrong basin.
     const std::size_t passes = 2 * s.effects.size();
+    // Each pass, the joint polish and the one from the extended model: equal parts of the share
+    // the caller gave this search (half of it before a second search around a long dead time).
+    const double from = s.span_lo, width = s.span_hi - s.span_lo;
     const double parts = static_cast<double>(passes + (start ? 2 : 1));
+    const auto part = [&](double k) { return from + width * k / parts; };
     for (std::size_t pass = 0; pass < passes; ++pass) {
-      s.span_lo = static_cast<double>(pass) / parts;
-      s.span_hi = static_cast<double>(pass + 1) / parts;
+      s.span_lo = part(static_cast<double>(pass));
+      s.span_hi = part(static_cast<double>(pass + 1));
       search_effect(s, pass % s.effects.size(), opt);
     }
+    s.span_lo = from;
+    s.span_hi = from + width;
     s.active = s.searched();
     std::vector<double> zj = s.restrict_to_active(s.base);
     const int n_local =
         opt.local_evaluations > 0 ? opt.local_evaluations : 60 * static_cast<int>(s.coords.size());
-    s.stage(static_cast<double>(passes) / parts, static_cast<double>(passes + 1) / parts, n_local,
+    s.stage(part(static_cast<double>(passes)), part(static_cast<double>(passes + 1)), n_local,
             "valve parameters: all effects polished together");
     double end = 0.0;
     nlopt_result r =
         run_nlopt(NLOPT_LN_NELDERMEAD, s, zj, n_local, opt.local_xtol, &end, 0.02).result;
     if (start) {  // a second joint polish, from the extended model's point (s.best_z: the better)
-      s.stage((parts - 1.0) / parts, 1.0, n_local,
+      s.stage(part(parts - 1.0), part(parts), n_local,
               "valve parameters: polished again from the model this one extends");
       double end_start = 0.0;
       s.base = *start;
