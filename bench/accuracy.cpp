@@ -199,16 +199,22 @@ nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, cons
            {"gain_percent", num(f.gain_percent)},
            {"score", num(f.score)},
            {"evidence", num(f.evidence)},
+           {"evidence_test", f.evidence_test},
            {"supported", f.supported},
            {"parameter_count", num(f.parameter_count)},
            {"output_bic_change", num(f.output_bic_change)},
            {"validation_deviance_change", num(f.validation_deviance_change)},
            {"prediction_bic_change", num(f.prediction_bic_change)},
+           {"prediction_validation_deviance_change", num(f.prediction_validation_deviance_change)},
            {"prediction_estimation_gain_percent", num(f.prediction_estimation_gain_percent)},
            {"prediction_validation_gain_percent", num(f.prediction_validation_gain_percent)},
            {"indistinguishable_from", f.indistinguishable_from}});
+    nlohmann::json tests = nlohmann::json::array();
+    for (const auto& t : o.residual_tests)
+      tests.push_back({{"name", t.name}, {"statistic", num(t.statistic)}, {"score", num(t.score)}});
     cases.push_back(
         {{"range", range},
+         {"residual_tests", tests},
          {"seed", o.loop.seed},
          {"category", o.loop.category},
          {"hidden", o.loop.hidden},

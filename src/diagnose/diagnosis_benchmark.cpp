@@ -64,6 +64,7 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
     const auto& f = dg.last().findings;
     o.findings = f;
     o.judge = dg.last().judge;
+    o.residual_tests = dg.last().residual.tests;
     o.samples = d.pv.size();
     o.estimation_end = dg.last().fit.estimation_end;
     if (o.judge.horizon == 0) {

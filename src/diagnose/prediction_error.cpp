@@ -7,17 +7,20 @@ namespace valvediag {
 
 PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
                                      std::size_t nk, std::size_t order, std::size_t from,
-                                     std::size_t estimation_end) {
+                                     std::size_t estimation_end, bool integrating) {
   PredictionError out;
   const std::size_t N = y.size();
   if (x.size() != N || estimation_end > N || order == 0) return out;
   if (from < nk + order) return out;
-  const std::size_t cols = 2 * order + 1;
+  // Integrating: the target is PV's change, its own past changes the first order - 1 columns.
+  const std::size_t ny = integrating ? order - 1 : order;
+  const std::size_t cols = ny + order + 1;
   if (estimation_end <= from + 4 * cols) return out;
+  auto target = [&](std::size_t t) { return integrating ? y[t] - y[t - 1] : y[t]; };
   auto row = [&](std::size_t t, double* r) {
-    for (std::size_t i = 0; i < order; ++i) r[i] = y[t - 1 - i];
-    for (std::size_t i = 0; i < order; ++i) r[order + i] = x[t - nk - 1 - i];
-    r[2 * order] = 1.0;
+    for (std::size_t i = 0; i < ny; ++i) r[i] = target(t - 1 - i);
+    for (std::size_t i = 0; i < order; ++i) r[ny + i] = x[t - nk - 1 - i];
+    r[ny + order] = 1.0;
   };
   // The normal equations, accumulated row by row: memory stays that of the coefficients
   // however long the record.
@@ -35,7 +38,7 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
       const double rj = r[j];
       double* gj = g + j * cols;
       for (std::size_t i = j; i < cols; ++i) gj[i] += rj * r[i];
-      hv[j] += y[t] * rj;
+      hv[j] += target(t) * rj;
     }
   }
   G = G.selfadjointView<Eigen::Lower>();
@@ -49,13 +52,15 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
       row(t, r.data());
       double p = 0.0;
       for (std::size_t i = 0; i < cols; ++i) p += theta(static_cast<Eigen::Index>(i)) * r[i];
-      s += (y[t] - p) * (y[t] - p);
+      s += (target(t) - p) * (target(t) - p);
       ++count;
     }
     return count > 0 ? s / static_cast<double>(count) : std::numeric_limits<double>::quiet_NaN();
   };
   out.order = order;
   out.nk = nk;
+  out.integrating = integrating;
+  out.parameters = cols;
   out.estimation_variance = mse(from, estimation_end, out.estimation_samples);
   if (estimation_end + 1 < N)
     out.validation_variance = mse(estimation_end, N, out.validation_samples);
@@ -66,11 +71,11 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
 PredictionError best_arx_prediction_error(const std::vector<double>& y,
                                           const std::vector<double>& x, std::size_t nk_max,
                                           std::size_t order, std::size_t from,
-                                          std::size_t estimation_end) {
+                                          std::size_t estimation_end, bool integrating) {
   PredictionError best;
   if (from < nk_max + order) return best;  // every dead time on the same samples
   for (std::size_t nk = 0; nk <= nk_max; ++nk) {
-    PredictionError p = arx_prediction_error(y, x, nk, order, from, estimation_end);
+    PredictionError p = arx_prediction_error(y, x, nk, order, from, estimation_end, integrating);
     if (p.ok && (!best.ok || p.estimation_variance < best.estimation_variance)) best = p;
   }
   return best;

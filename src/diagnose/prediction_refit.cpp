@@ -45,8 +45,8 @@ struct Refit {
   double cost(std::vector<double>& z) {
     return profile_minimum(coords, profiled, z, [this](const std::vector<double>& zc) {
       ++evaluations;
-      const PredictionError e =
-          arx_prediction_error(y, position(zc), nk, opt.order, opt.from, opt.estimation_end);
+      const PredictionError e = arx_prediction_error(y, position(zc), nk, opt.order, opt.from,
+                                                     opt.estimation_end, opt.integrating);
       return e.ok ? e.estimation_variance : std::numeric_limits<double>::infinity();
     });
   }
@@ -99,8 +99,8 @@ PredictionRefit refit_by_prediction(const std::vector<double>& u, const std::vec
     (r.coords[i].profile_points > 0 ? r.profiled : r.searched).push_back(i);
   }
   if (r.searched.empty()) return out;
-  const PredictionError at_trial = best_arx_prediction_error(y, trial.x_hat, opt.nk_max, opt.order,
-                                                             opt.from, opt.estimation_end);
+  const PredictionError at_trial = best_arx_prediction_error(
+      y, trial.x_hat, opt.nk_max, opt.order, opt.from, opt.estimation_end, opt.integrating);
   if (!at_trial.ok) return out;
   r.nk = at_trial.nk;
   // The grid: the first searched coordinate, denser near its lower end (bands and lags are
@@ -155,8 +155,8 @@ PredictionRefit refit_by_prediction(const std::vector<double>& u, const std::vec
     }
   }
   out.x_hat = r.position(best_z);
-  out.error =
-      best_arx_prediction_error(y, out.x_hat, opt.nk_max, opt.order, opt.from, opt.estimation_end);
+  out.error = best_arx_prediction_error(y, out.x_hat, opt.nk_max, opt.order, opt.from,
+                                        opt.estimation_end, opt.integrating);
   std::vector<double> th(r.coords.size());
   for (std::size_t i = 0; i < r.coords.size(); ++i) th[i] = r.value(i, best_z[i]);
   out.parameters = block_parameters(make_valve_block(r.spec, th.data(), r.range));

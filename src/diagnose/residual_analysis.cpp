@@ -403,7 +403,10 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     push("drift", {"integrator", "disturbance"}, r2, (r2 - 0.2) / 0.5,
          strprintf("a straight line in time explains %.0f %% of the residual variance", 100 * r2));
   }
-  // 8. Whiteness (Ljung-Box) of the residual.
+  // 8. Whiteness (Ljung-Box) of the residual. Reported, pointing at no effect: a simulated
+  // output's error is the noise filtered by the process, coloured whether or not a load is
+  // missing (measured: Q above 200 times its 95 % point on 94 of 138 development loops without
+  // one, the same as with one).
   {
     const int h = std::max(5, std::min<int>(opt.max_lag, static_cast<int>(n / 5)));
     const auto c = ccf(r, r, h);
@@ -415,7 +418,7 @@ ResidualAnalysis analyse_residual(const std::vector<double>& u, const std::vecto
     const double hh = h;
     const double crit =
         hh * std::pow(1 - 2 / (9 * hh) + 1.645 * std::sqrt(2 / (9 * hh)), 3);  // chi2 95 %
-    push("whiteness", {"disturbance"}, q / crit, (q / crit - 1) / 20,
+    push("whiteness", {}, q / crit, (q / crit - 1) / 20,
          strprintf("Ljung-Box Q = %.0f over %.0f lags (white below %.0f)", q, hh, crit));
   }
   return a;

@@ -63,9 +63,9 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   o << "findings (most likely missing first: among valve, dead-time and process-lag effects, "
        "the lower PE BIC (the one-step prediction of PV), valves with memory by their nested "
        "test, a process lag above an actuator lag that commutes with it; where a load or an "
-       "integrator stands among them: one that prediction shows evidence for above an "
-       "unsupported load, else a clearly larger gain on both parts, else fewer parameters, else "
-       "the higher score):\n";
+       "integrator stands among them: of two unsupported, one that prediction shows evidence "
+       "for (an integrator: its restriction holds) above one it shows none for, else a clearly "
+       "larger gain on both parts, else fewer parameters, else the higher score):\n";
   o << "  rank  effect          score  gain (val / est)    PE BIC    evidence\n";
   int rank = 0;
   for (const auto& f : s.findings) {
@@ -288,6 +288,8 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
          {"prediction_estimation_gain_percent", num_json(f.prediction_estimation_gain_percent)},
          {"prediction_validation_gain_percent", num_json(f.prediction_validation_gain_percent)},
          {"prediction_bic_change", num_json(f.prediction_bic_change)},
+         {"prediction_validation_deviance_change",
+          num_json(f.prediction_validation_deviance_change)},
          {"prediction_parameters", pp},
          {"parameter_count", num_json(f.parameter_count)},
          {"output_bic_change", num_json(f.output_bic_change)},
@@ -385,8 +387,11 @@ std::string format_model_fit(const ModelFit& f, const ResidualAnalysis& where,
   }
   for (const auto& test : where.tests)
     if (test.score >= 0.3) {
-      o << "           " << test.name << " " << num(test.score) << " -> ";
-      for (std::size_t i = 0; i < test.effects.size(); ++i) o << (i ? ", " : "") << test.effects[i];
+      o << "           " << test.name << " " << num(test.score);
+      // A test that points to no effect (whiteness) says what it measured instead.
+      if (test.effects.empty()) o << ": " << test.detail;
+      for (std::size_t i = 0; i < test.effects.size(); ++i)
+        o << (i ? ", " : " -> ") << test.effects[i];
       o << "\n";
     }
   o << "solver:    " << to_string(f.status) << " (" << f.stop_reason << "), " << f.evaluations

@@ -89,8 +89,8 @@ std::string format_where(const ResidualAnalysis& a, const FitContext& ctx) {
       << num(g->mean, 3) << ")\n";
   for (const auto& t : a.tests)
     if (t.score >= 0.3) {
-      o << "           " << t.name << " " << num(t.score, 2) << " -> ";
-      for (std::size_t i = 0; i < t.effects.size(); ++i) o << (i ? ", " : "") << t.effects[i];
+      o << "           " << t.name << " " << num(t.score, 2);
+      for (std::size_t i = 0; i < t.effects.size(); ++i) o << (i ? ", " : " -> ") << t.effects[i];
       o << ": " << t.detail << "\n";
     }
   return o.str();

@@ -988,6 +988,7 @@ void where_section(std::ostringstream& o, const ReportContent& c) {
   for (const auto& ts : a.tests) {
     std::string effects;
     for (std::size_t i = 0; i < ts.effects.size(); ++i) effects += (i ? ", " : "") + ts.effects[i];
+    if (effects.empty()) effects = "none (reported only)";
     o << "<tr" << (ts.score >= 0.3 ? " style=\"font-weight:bold\"" : "") << "><td>" << e(ts.name)
       << "</td><td class=\"num\">" << e(num(ts.score, 2)) << "</td><td>" << e(effects)
       << "</td><td>" << e(ts.detail) << "</td></tr>\n";

@@ -39,6 +39,10 @@ struct Finding {
   double prediction_estimation_gain_percent = std::numeric_limits<double>::quiet_NaN();
   double prediction_validation_gain_percent = std::numeric_limits<double>::quiet_NaN();
   double prediction_bic_change = std::numeric_limits<double>::quiet_NaN();
+  // n ln(variance left by the trial / by the model) on the held-out part, n its samples: the
+  // likelihood-ratio statistic there (an `integrator` is a restriction of the model's predictor,
+  // held out unrefuted while this stays below the chi-square's 99 % point of one degree).
+  double prediction_validation_deviance_change = std::numeric_limits<double>::quiet_NaN();
   // A valve effect's parameters refitted to that prediction (prediction_refit.hpp), which the
   // three figures above score; empty when the trial's own are scored (no refit).
   std::vector<NamedValue> prediction_parameters;

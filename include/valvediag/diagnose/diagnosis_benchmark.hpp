@@ -44,6 +44,7 @@ struct BenchmarkOutcome {
   std::string detail;
   std::vector<Finding> findings;  // the step's findings, ranked (valvediag_accuracy --json)
   KStepJudge judge;               // what their gains measure
+  std::vector<ResidualTest> residual_tests;     // the start model's residual analysis
   std::size_t samples = 0, estimation_end = 0;  // the record's, and where its held-out part starts
   double seconds = 0.0;
   std::string error;  // the diagnosis threw: why

@@ -21,6 +21,7 @@ struct PredictionRefitOptions {
   std::size_t nk_max = 10;         // its dead time is profiled over [0, nk_max]
   std::size_t from = 0;            // first sample scored (>= nk_max + order)
   std::size_t estimation_end = 0;  // fitted on [from, estimation_end); held out after
+  bool integrating = false;        // the predictor's A has the factor (1 - q^-1)
   std::size_t grid_points = 16;    // the first coordinate's grid before the local polish
   int local_evaluations = 60;      // Nelder-Mead's budget per searched coordinate
 };
