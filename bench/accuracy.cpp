@@ -206,6 +206,7 @@ nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, cons
            {"validation_deviance_change", num(f.validation_deviance_change)},
            {"prediction_bic_change", num(f.prediction_bic_change)},
            {"prediction_validation_deviance_change", num(f.prediction_validation_deviance_change)},
+           {"prediction_drift_bic_change", num(f.prediction_drift_bic_change)},
            {"prediction_estimation_gain_percent", num(f.prediction_estimation_gain_percent)},
            {"prediction_validation_gain_percent", num(f.prediction_validation_gain_percent)},
            {"indistinguishable_from", f.indistinguishable_from}});

@@ -372,9 +372,13 @@ constexpr double kPositiveBic = 2.0;
 // worse than chance allows).
 bool prediction_evidence(const Finding& f) {
   if (!judged_by_prediction(f.effect) || !(f.prediction_bic_change <= -kPositiveBic)) return false;
+  // And the unit root the process's: the predictor of a drifting load (B(1) = 0 besides) fits
+  // worse by kPositiveBic (a random walk at the valve makes a settling loop's predictor pass
+  // the first restriction too).
   if (f.effect == "integrator")
     return std::isfinite(f.prediction_validation_deviance_change) &&
-           f.prediction_validation_deviance_change < chi_square_quantile_99(1.0);
+           f.prediction_validation_deviance_change < chi_square_quantile_99(1.0) &&
+           f.prediction_drift_bic_change >= kPositiveBic;
   return f.prediction_validation_gain_percent > 0;
 }
 
@@ -698,6 +702,17 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
         f.prediction_bic_change =
             n * std::log(pe.estimation_variance / pe_model.estimation_variance) +
             extra * std::log(n);
+        // The integrator's unit root tested against a drifting load's (prediction_evidence).
+        if (names[i] == "integrator" && pe.integrating && !pe_model.integrating &&
+            t.x_hat.size() == y.size()) {
+          const PredictionError drift = best_arx_prediction_error(
+              y, t.x_hat, nk_range(t), kPredictionOrder, pe_start, t.estimation_end, true, true);
+          if (drift.ok && drift.estimation_samples == pe.estimation_samples)
+            f.prediction_drift_bic_change =
+                n * std::log(drift.estimation_variance / pe.estimation_variance) +
+                (static_cast<double>(drift.parameters) - static_cast<double>(pe.parameters)) *
+                    std::log(n);
+        }
         if (pe.validation_samples > 0 && pe.validation_samples == pe_model.validation_samples &&
             pe.validation_variance > 0 && pe_model.validation_variance > 0)
           f.prediction_validation_deviance_change =

@@ -7,20 +7,24 @@ namespace valvediag {
 
 PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
                                      std::size_t nk, std::size_t order, std::size_t from,
-                                     std::size_t estimation_end, bool integrating) {
+                                     std::size_t estimation_end, bool integrating,
+                                     bool differenced_input) {
   PredictionError out;
+  differenced_input = differenced_input && integrating;
   const std::size_t N = y.size();
   if (x.size() != N || estimation_end > N || order == 0) return out;
   if (from < nk + order) return out;
   // Integrating: the target is PV's change, its own past changes the first order - 1 columns.
   const std::size_t ny = integrating ? order - 1 : order;
-  const std::size_t cols = ny + order + 1;
+  const std::size_t nx = differenced_input ? order - 1 : order;
+  const std::size_t cols = ny + nx + 1;
   if (estimation_end <= from + 4 * cols) return out;
   auto target = [&](std::size_t t) { return integrating ? y[t] - y[t - 1] : y[t]; };
   auto row = [&](std::size_t t, double* r) {
     for (std::size_t i = 0; i < ny; ++i) r[i] = target(t - 1 - i);
-    for (std::size_t i = 0; i < order; ++i) r[ny + i] = x[t - nk - 1 - i];
-    r[ny + order] = 1.0;
+    for (std::size_t i = 0; i < nx; ++i)
+      r[ny + i] = differenced_input ? x[t - nk - 1 - i] - x[t - nk - 2 - i] : x[t - nk - 1 - i];
+    r[ny + nx] = 1.0;
   };
   // The normal equations, accumulated row by row: memory stays that of the coefficients
   // however long the record.
@@ -60,6 +64,7 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
   out.order = order;
   out.nk = nk;
   out.integrating = integrating;
+  out.differenced_input = differenced_input;
   out.parameters = cols;
   out.estimation_variance = mse(from, estimation_end, out.estimation_samples);
   if (estimation_end + 1 < N)
@@ -71,11 +76,13 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
 PredictionError best_arx_prediction_error(const std::vector<double>& y,
                                           const std::vector<double>& x, std::size_t nk_max,
                                           std::size_t order, std::size_t from,
-                                          std::size_t estimation_end, bool integrating) {
+                                          std::size_t estimation_end, bool integrating,
+                                          bool differenced_input) {
   PredictionError best;
   if (from < nk_max + order) return best;  // every dead time on the same samples
   for (std::size_t nk = 0; nk <= nk_max; ++nk) {
-    PredictionError p = arx_prediction_error(y, x, nk, order, from, estimation_end, integrating);
+    PredictionError p =
+        arx_prediction_error(y, x, nk, order, from, estimation_end, integrating, differenced_input);
     if (p.ok && (!best.ok || p.estimation_variance < best.estimation_variance)) best = p;
   }
   return best;

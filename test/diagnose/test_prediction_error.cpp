@@ -103,6 +103,48 @@ TEST_CASE("the integrating predictor predicts an integrating process as well wit
   CHECK(n * std::log(rest_s.estimation_variance / free_s.estimation_variance) > 100.0);
 }
 
+// B(1) = 0 besides (`differenced_input`): the form of a settling process under a load that drifts
+// (a random walk: A and B share the unit root), which an integrating process refutes.
+TEST_CASE("the drifting-load predictor tells a wandering load from an integrating process") {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> e(0.0, 0.1), walk(0.0, 0.05);
+  const ArxData s = arx_data(4000, 9);
+  std::vector<double> yi(s.x.size(), 0.0), yl(s.x.size(), 0.0), load(s.x.size(), 0.0);
+  for (std::size_t t = 3; t < yi.size(); ++t) {
+    yi[t] = yi[t - 1] + 0.5 * (yi[t - 1] - yi[t - 2]) + 0.02 * s.x[t - 3] + e(rng);
+    load[t] = load[t - 1] + walk(rng);
+  }
+  // Settles (y = 0.8 y(t-1) + 0.5 x(t-3)), with the random walk added to its output.
+  for (std::size_t t = 3; t < yl.size(); ++t) yl[t] = 0.8 * yl[t - 1] + 0.5 * s.x[t - 3];
+  for (std::size_t t = 0; t < yl.size(); ++t) yl[t] += load[t] + 0.3 * e(rng);
+  const auto bic = [](const PredictionError& p) {
+    const double n = static_cast<double>(p.estimation_samples);
+    return n * std::log(p.estimation_variance) + static_cast<double>(p.parameters) * std::log(n);
+  };
+  for (const bool integrates : {true, false}) {
+    CAPTURE(integrates);
+    const std::vector<double>& y = integrates ? yi : yl;
+    const PredictionError free = arx_prediction_error(y, s.x, 2, 6, 20, 2800);
+    REQUIRE(free.ok);
+    const PredictionError rest = arx_prediction_error(y, s.x, 2, 6, 20, 2800, true);
+    const PredictionError drift = arx_prediction_error(y, s.x, 2, 6, 20, 2800, true, true);
+    REQUIRE(drift.ok);
+    CHECK(drift.differenced_input);
+    CHECK(drift.parameters + 1 == rest.parameters);
+    if (integrates) {
+      CHECK(bic(rest) < bic(free) - 2.0);     // A(1) = 0 holds
+      CHECK(bic(drift) > bic(rest) + 100.0);  // x's level drives PV's rate
+    } else {
+      CHECK(bic(drift) < bic(rest));  // a unit root there is the load's
+    }
+  }
+  // `differenced_input` needs `integrating`: alone it changes nothing.
+  const PredictionError alone = arx_prediction_error(yl, s.x, 2, 6, 20, 2800, false, true);
+  CHECK_FALSE(alone.differenced_input);
+  CHECK(alone.estimation_variance ==
+        doctest::Approx(arx_prediction_error(yl, s.x, 2, 6, 20, 2800).estimation_variance));
+}
+
 TEST_CASE("arx_prediction_error refuses what it cannot score") {
   const ArxData d = arx_data(400, 3);
   CHECK_FALSE(arx_prediction_error(d.y, std::vector<double>(399, 0.0), 2, 2, 20, 300).ok);

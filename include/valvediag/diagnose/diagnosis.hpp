@@ -43,6 +43,11 @@ struct Finding {
   // likelihood-ratio statistic there (an `integrator` is a restriction of the model's predictor,
   // held out unrefuted while this stays below the chi-square's 99 % point of one degree).
   double prediction_validation_deviance_change = std::numeric_limits<double>::quiet_NaN();
+  // `integrator` only: the BIC of the predictor whose unit root is a drifting load's (A and B
+  // both with the factor 1 - q^-1: PV's change driven by x's changes) less that of the
+  // integrating one (x's level drives PV's change). Positive: the process integrates, not the
+  // load.
+  double prediction_drift_bic_change = std::numeric_limits<double>::quiet_NaN();
   // A valve effect's parameters refitted to that prediction (prediction_refit.hpp), which the
   // three figures above score; empty when the trial's own are scored (no refit).
   std::vector<NamedValue> prediction_parameters;

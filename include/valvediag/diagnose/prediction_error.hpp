@@ -14,10 +14,11 @@ namespace valvediag {
 
 struct PredictionError {
   bool ok = false;
-  std::size_t order = 0;       // na = nb of the ARX structure
-  std::size_t nk = 0;          // B's taps from x(t - nk - 1) on
-  bool integrating = false;    // A has the factor (1 - q^-1): PV's changes predicted
-  std::size_t parameters = 0;  // coefficients fitted (A's free ones, B's, the constant)
+  std::size_t order = 0;           // na = nb of the ARX structure
+  std::size_t nk = 0;              // B's taps from x(t - nk - 1) on
+  bool integrating = false;        // A has the factor (1 - q^-1): PV's changes predicted
+  bool differenced_input = false;  // and B too: x's changes drive them
+  std::size_t parameters = 0;      // coefficients fitted (A's free ones, B's, the constant)
   // Mean squared one-step prediction error on each part; the held-out part's with the
   // coefficients fitted on the estimation part.
   double estimation_variance = std::numeric_limits<double>::quiet_NaN();
@@ -32,9 +33,14 @@ struct PredictionError {
 // `integrating`: A = (1 - q^-1) A'(q^-1), A' of order - 1 (the restriction A(1) = 0, one
 // coefficient fewer): the change of PV predicted from its past changes and x. A process that
 // integrates predicts as well so restricted; one that settles does not.
+// `differenced_input` (with `integrating`): B = (1 - q^-1) B'(q^-1) too, B' of order - 1 (B(1) = 0,
+// one coefficient fewer again): PV's change driven by x's changes, not its level. That is the
+// form of a process that settles under a load that drifts (a random walk: the unit root is the
+// noise's, so A and B share it); a process that integrates refutes it.
 PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
                                      std::size_t nk, std::size_t order, std::size_t from,
-                                     std::size_t estimation_end, bool integrating = false);
+                                     std::size_t estimation_end, bool integrating = false,
+                                     bool differenced_input = false);
 
 // The same with the dead time profiled out: the nk in [0, nk_max] whose prediction error on
 // the estimation part is least (a model's own dead time, fitted to simulated output, need not
@@ -43,7 +49,8 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
 PredictionError best_arx_prediction_error(const std::vector<double>& y,
                                           const std::vector<double>& x, std::size_t nk_max,
                                           std::size_t order, std::size_t from,
-                                          std::size_t estimation_end, bool integrating = false);
+                                          std::size_t estimation_end, bool integrating = false,
+                                          bool differenced_input = false);
 
 // How much less one-step prediction error a model leaves than a reference: 100 (1 - rms/rms_ref)
 // on the estimation and on the held-out part (NaN where either has none).
