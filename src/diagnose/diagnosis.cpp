@@ -928,16 +928,14 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (!std::isfinite(bv) || !std::isfinite(wv) || (bv > 0 && bv > wv))
         return a.prediction_bic_change < b.prediction_bic_change;
     }
-    // One supported by its simulated-output gains whose prediction of PV refutes it (its
-    // parameters cost more than they predict), the other not supported but predicting PV clearly
-    // better than the model, held out too: on the path from OP to PV the prediction is the judge
-    // (closed loop biases the simulated output, above), so the evidence ranks first.
-    if (path_pair && a.supported != b.supported) {
-      const Finding& s = a.supported ? a : b;
-      const Finding& u = a.supported ? b : a;
-      if (s.prediction_bic_change > 0 && u.prediction_bic_change <= -kPositiveBic &&
-          u.prediction_validation_gain_percent > 0)
-        return &u == &a;
+    // One whose prediction of PV refutes it (its parameters cost more than they predict: BIC
+    // above 0), the other with the prediction's evidence (prediction_evidence): the prediction
+    // is the judge of both (closed loop biases the simulated output, above), so the evidence
+    // ranks first, whatever their gains supported. Not between two valves with memory.
+    if (judged_by_prediction(a.effect) && judged_by_prediction(b.effect) &&
+        !(is_memory_effect(a.effect) && is_memory_effect(b.effect))) {
+      if (a.prediction_bic_change > 0 && prediction_evidence(b)) return false;
+      if (b.prediction_bic_change > 0 && prediction_evidence(a)) return true;
     }
     // Neither supported by its gains: the one the prediction of PV shows evidence for ranks
     // above one it shows none for (a load: its trial keeps the valve position, so its prediction
