@@ -61,9 +61,9 @@ void run_workbench(std::vector<serve::ServedLoop> loops, const WorkbenchSettings
   const bool keep = w.keep_lead_in;
   // Set on Ctrl-C: a verdict being computed stops at its next fit instead of holding the exit.
   std::atomic<bool> closing{false};
-  serve::VerdictFunction verdict = [=, &closing](const LoopData& d) {
+  serve::VerdictFunction verdict = [=, &closing](const LoopData& d, const OpRange& span) {
     VerdictOptions vo =
-        verdict_options(range, validate, keep, d.t.empty() ? 0.0 : d.t.front(), min_gain);
+        verdict_options(span, validate, keep, d.t.empty() ? 0.0 : d.t.front(), min_gain);
     vo.diagnose.fit.cancel = &closing;
     const LoopVerdict lv = loop_verdict(d, vo);
     nlohmann::json j;
@@ -258,6 +258,11 @@ void add_serve(CLI::App& app, int& exit_code) {
     a->w.range = parse_op_range(a->op_range);
     if (!a->config.empty() && a->db.empty())
       throw UsageError("--config needs --db site.sqlite: the recording the workbench writes");
+    if (!a->config.empty() && !a->op_range.empty())
+      throw UsageError(
+          "--op-range goes with data files or --db alone; a site gives each loop's OP range as "
+          "op_range = [min, max] in " +
+          a->config);
     if (a->files.empty() == a->db.empty())
       throw UsageError(
           "give data files, or --db site.sqlite (a recording; with --config site.toml: record "

@@ -131,13 +131,19 @@ LiveRecording::LiveRecording(SiteConfig site, const RecordingSource& src,
     LoopData empty;
     empty.source = src.db + " loop " + cfg.name + " (recording)";
     serve::ServedLoop l(cfg.name, std::move(empty));
+    // The site's OP span of the loop: its verdict, its jobs and its quiet lead-in, as sweep
+    // --config judges it.
+    const OpRange span{cfg.op_min, cfg.op_max};
+    l.op_range = span;
+    WorkbenchSettings wl = w;
+    wl.range = span;
     const std::string db = src.db, name = cfg.name;
     const double window_s = src.window_s;
     const std::size_t max_rows = src.max_rows;
     // The current run's latest window, once the recorder has stored some of it; read errors
     // (nothing clean yet) keep the data shown as it was.
     l.live = [this, db, name, window_s, max_rows,
-              w]() -> std::shared_ptr<const serve::LoopSnapshot> {
+              wl]() -> std::shared_ptr<const serve::LoopSnapshot> {
       const std::int64_t run = run_.load();
       if (run == 0) return nullptr;
       try {
@@ -145,7 +151,7 @@ LiveRecording::LiveRecording(SiteConfig site, const RecordingSource& src,
         if (!r || r->data.size() < 2) return nullptr;
         std::vector<std::string> notes;
         return std::make_shared<const serve::LoopSnapshot>(
-            served_snapshot(std::move(r->data), w, notes));
+            served_snapshot(std::move(r->data), wl, notes));
       } catch (const std::exception&) {
         return nullptr;
       }

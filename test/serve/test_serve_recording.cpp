@@ -270,6 +270,12 @@ TEST_CASE("serve --db: a missing file, not a recording, no loop matching, an emp
   r = serve({"--config", write_site("serve_nodb.toml", plc.port())});
   CHECK(r.status == 2);
   CHECK(r.out.find("--config needs --db") != std::string::npos);
+  // A site gives each loop's OP span: --op-range beside it is refused, as sweep --config does.
+  const std::string site = write_site("serve_range.toml", plc.port());
+  r = serve({"--config", site, "--db", fresh("serve_range.sqlite"), "--op-range", "0:50"});
+  CHECK(r.status == 2);
+  CHECK(r.out.find("op_range = [min, max] in " + site) != std::string::npos);
+  CHECK(r.out.find("serving") == std::string::npos);
   // A loop whose every request failed (nothing listens on port 1): its recording has no good
   // sample; serve names it and says what to do.
   const std::string dead = fresh("serve_dead.sqlite");

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <thread>
+#include <tuple>
 
 #include "api_checks.hpp"
 #include "valvediag/serve/workbench_api.hpp"
@@ -48,7 +49,7 @@ struct Fixture {
   explicit Fixture(std::string token = "")
       : api(
             {{"long", long_loop()}, {"FIC101", short_loop()}},
-            [this](const LoopData& d) {
+            [this](const LoopData& d, const OpRange&) {
               ++calls;
               return json{{"verdict", d.size() > 100 ? "stiction" : "not-enough-data"}};
             },
@@ -335,7 +336,7 @@ TEST_CASE("the verdict is computed once and cached, also under concurrent reques
 
 TEST_CASE("listing the loops does not wait for a verdict being computed") {
   std::atomic<bool> release{false}, started{false};
-  WorkbenchApi api({{"x", short_loop()}}, [&](const LoopData&) {
+  WorkbenchApi api({{"x", short_loop()}}, [&](const LoopData&, const OpRange&) {
     started = true;
     for (int i = 0; i < 1000 && !release; ++i)  // bounded: at most 10 s
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -357,9 +358,35 @@ TEST_CASE("listing the loops does not wait for a verdict being computed") {
   CHECK(api.handle(l).body["loops"][0]["verdict"] == "deadband");
 }
 
+// serve --config: each loop is judged on its site's OP span (ServedLoop::op_range), as sweep
+// --config judges it; a loop without one on the server's (--op-range).
+TEST_CASE("each loop's verdict is given its own OP span, else the server's") {
+  std::vector<ServedLoop> loops;
+  loops.emplace_back("site-loop", short_loop());
+  loops.back().op_range = OpRange{4.0, 20.0};
+  loops.emplace_back("file-loop", short_loop());
+  ModelOptions mo;
+  mo.range = OpRange{-10.0, 110.0};
+  WorkbenchApi api(
+      std::move(loops),
+      [](const LoopData&, const OpRange& r) {
+        return json{{"verdict", "no-valve-problem"}, {"lo", r.lo}, {"hi", r.hi}};
+      },
+      "", mo);
+  for (const auto& [id, lo, hi] : {std::tuple{0, 4.0, 20.0}, std::tuple{1, -10.0, 110.0}}) {
+    CAPTURE(id);
+    ApiRequest r;
+    r.path = "/api/loops/" + std::to_string(id) + "/verdict";
+    const ApiResponse v = api.handle(r);
+    REQUIRE(v.status == 200);
+    CHECK(v.body["lo"] == lo);
+    CHECK(v.body["hi"] == hi);
+  }
+}
+
 TEST_CASE("a verdict that fails is a 500 JSON error, and tried again next time") {
   int calls = 0;
-  WorkbenchApi api({{"x", short_loop()}}, [&](const LoopData&) -> json {
+  WorkbenchApi api({{"x", short_loop()}}, [&](const LoopData&, const OpRange&) -> json {
     if (++calls == 1) throw std::runtime_error("boom");
     return json{{"verdict", "no-valve-problem"}};
   });

@@ -66,7 +66,7 @@ struct Api {
   explicit Api(std::string token = "", JobLimits limits = {}, std::size_t loops = 1)
       : api(
             make_loops(loops),
-            [](const LoopData&) {
+            [](const LoopData&, const OpRange&) {
               return json{{"verdict", "stiction"}};
             },
             std::move(token), ModelOptions{}, limits) {}

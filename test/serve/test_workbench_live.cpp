@@ -63,7 +63,7 @@ json run(const WorkbenchApi& api, const json& body, std::size_t loop = 0) {
   }
 }
 
-json no_verdict(const LoopData&) {
+json no_verdict(const LoopData&, const OpRange&) {
   return json{{"verdict", "stiction"}};
 }
 
@@ -161,7 +161,7 @@ TEST_CASE("a live loop is read again as it grows; each job fits the data of its 
   std::atomic<int> verdicts{0};
   std::vector<ServedLoop> loops;
   loops.push_back(std::move(loop));
-  const WorkbenchApi api(std::move(loops), [&](const LoopData& d) {
+  const WorkbenchApi api(std::move(loops), [&](const LoopData& d, const OpRange&) {
     ++verdicts;
     return json{{"verdict", "stiction"}, {"judged", d.size()}};
   });

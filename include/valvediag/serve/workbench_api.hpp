@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "valvediag/core/op_range.hpp"
 #include "valvediag/io/loop_data.hpp"
 #include "valvediag/report/model_history.hpp"
 #include "valvediag/serve/jobs.hpp"
@@ -55,6 +56,9 @@ struct ServedLoop {
   HistoryWriter history_writer;
   // Set: the loop is live; its data is read again at most every kLiveRefreshS when asked for.
   LoopReader live;
+  // The loop's OP span when its site gives one (serve --config: the loop's op_range), for its
+  // verdict and its jobs; nullopt: the server's (--op-range, ModelOptions::range).
+  std::optional<OpRange> op_range;
 };
 
 // A live loop is read again at most this often (s): a page polling every second reads the
@@ -107,8 +111,9 @@ std::string token_cookie_name(const std::string& host);
 inline constexpr std::size_t kMaxBody = 64 * 1024;
 
 // The JSON of a loop's verdict: the CLI passes the very call `diagnose` makes (loop_verdict()
-// with its options, written by add_verdict_json()), so both give the same verdict.
-using VerdictFunction = std::function<nlohmann::json(const LoopData&)>;
+// with its options, written by add_verdict_json()), so both give the same verdict. The range is
+// the loop's OP span (ServedLoop::op_range, else the server's).
+using VerdictFunction = std::function<nlohmann::json(const LoopData&, const OpRange&)>;
 
 // Bounds of GET /api/loops/{id}/series.
 inline constexpr int kDefaultBuckets = 1000;
