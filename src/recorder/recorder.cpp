@@ -372,17 +372,27 @@ RecorderStatus Recorder::run(const std::atomic<bool>& stop,
   // Commits must not stall the status line: a busy database is retried each commit interval.
   m.db->set_busy_timeout(0.25);
   const auto t0 = m.opt.start.value_or(Clock::now());
-  // The run and its loops now if the database lets us; else the polls start anyway and the
-  // commits retry (stored() counts the wait against busy_limit_s).
-  (void)m.stored([&] { m.set_up(); }, Clock::now());
-
   std::atomic<bool> done{false};
   std::atomic<int> running{static_cast<int>(m.workers.size())};
+  // The polls first: the database's set-up below can wait (a busy timeout, a slow disk) and a
+  // tick due meanwhile would be marked missed (measured: the first 5 ticks of 50 ms behind a
+  // busy database). Their rows wait in memory until it is ready; the poll threads touch no
+  // state set_up() writes.
   for (auto& w : m.workers)
     w.thread = std::thread([&m, &w, t0, &stop, &done, &running] {
       m.poll(w, t0, stop, done);
       --running;
     });
+  // The run and its loops now if the database lets us; else the commits retry (stored() counts
+  // the wait against busy_limit_s). Any other failure stops the polls before it propagates.
+  try {
+    (void)m.stored([&] { m.set_up(); }, Clock::now());
+  } catch (...) {
+    done = true;
+    for (auto& w : m.workers)
+      if (w.thread.joinable()) w.thread.join();
+    throw;
+  }
   auto last_commit = t0, last_status = t0;
   std::string failure;
   auto report = [&](Clock::time_point now) {
