@@ -693,31 +693,18 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       f.prediction_estimation_gain_percent = g.estimation;
       f.prediction_validation_gain_percent = g.validation;
       if (pe.ok) {
-        const double n = static_cast<double>(pe.estimation_samples);
         // The valve's or lag's parameters, and the predictor's own difference: an integrating
         // one has one coefficient fewer (the restriction A(1) = 0 is what `integrator` claims).
-        const double extra = effect_parameter_count(names[i], t, Ts) +
-                             static_cast<double>(pe.parameters) -
-                             static_cast<double>(pe_model.parameters);
         f.prediction_bic_change =
-            n * std::log(pe.estimation_variance / pe_model.estimation_variance) +
-            extra * std::log(n);
+            prediction_bic_change(pe, pe_model, effect_parameter_count(names[i], t, Ts));
+        f.prediction_validation_deviance_change = prediction_validation_deviance(pe, pe_model);
         // The integrator's unit root tested against a drifting load's (prediction_evidence).
         if (names[i] == "integrator" && pe.integrating && !pe_model.integrating &&
-            t.x_hat.size() == y.size()) {
-          const PredictionError drift = best_arx_prediction_error(
-              y, t.x_hat, nk_range(t), kPredictionOrder, pe_start, t.estimation_end, true, true);
-          if (drift.ok && drift.estimation_samples == pe.estimation_samples)
-            f.prediction_drift_bic_change =
-                n * std::log(drift.estimation_variance / pe.estimation_variance) +
-                (static_cast<double>(drift.parameters) - static_cast<double>(pe.parameters)) *
-                    std::log(n);
-        }
-        if (pe.validation_samples > 0 && pe.validation_samples == pe_model.validation_samples &&
-            pe.validation_variance > 0 && pe_model.validation_variance > 0)
-          f.prediction_validation_deviance_change =
-              static_cast<double>(pe.validation_samples) *
-              std::log(pe.validation_variance / pe_model.validation_variance);
+            t.x_hat.size() == y.size())
+          f.prediction_drift_bic_change = prediction_bic_change(
+              best_arx_prediction_error(y, t.x_hat, nk_range(t), kPredictionOrder, pe_start,
+                                        t.estimation_end, true, true),
+              pe);
       }
     }
     f.effect = names[i];

@@ -100,4 +100,23 @@ PredictionGain prediction_gain(const PredictionError& model, const PredictionErr
   return g;
 }
 
+double prediction_bic_change(const PredictionError& model, const PredictionError& reference,
+                             double extra_parameters) {
+  if (!model.ok || !reference.ok || model.estimation_samples != reference.estimation_samples)
+    return std::numeric_limits<double>::quiet_NaN();
+  const double n = static_cast<double>(model.estimation_samples);
+  const double k = static_cast<double>(model.parameters) -
+                   static_cast<double>(reference.parameters) + extra_parameters;
+  return n * std::log(model.estimation_variance / reference.estimation_variance) + k * std::log(n);
+}
+
+double prediction_validation_deviance(const PredictionError& model,
+                                      const PredictionError& reference) {
+  if (model.validation_samples == 0 || model.validation_samples != reference.validation_samples ||
+      !(model.validation_variance > 0) || !(reference.validation_variance > 0))
+    return std::numeric_limits<double>::quiet_NaN();
+  return static_cast<double>(model.validation_samples) *
+         std::log(model.validation_variance / reference.validation_variance);
+}
+
 }  // namespace valvediag

@@ -467,8 +467,7 @@ ApiResponse WorkbenchApi::submit(const ApiRequest& req, std::size_t id) const {
   info["loop"] = id;
   LoopModels* models = models_[id].get();
   std::mutex* busy = &cache_[id]->jobs;
-  ModelOptions opt = model_options_;
-  if (loops_[id].op_range) opt.range = *loops_[id].op_range;
+  const ModelOptions opt = options_of(id);
   const auto job = jobs_.submit(info, [=, this](JobControl& c) {
     // One job per loop at a time: each starts from the model the one before left.
     std::unique_lock<std::mutex> lock(*busy, std::defer_lock);
@@ -538,6 +537,12 @@ json WorkbenchApi::loops_json() const {
   return json{{"loops", list}};
 }
 
+ModelOptions WorkbenchApi::options_of(std::size_t id) const {
+  ModelOptions o = model_options_;
+  if (loops_[id].op_range) o.range = *loops_[id].op_range;
+  return o;
+}
+
 json WorkbenchApi::verdict_json(std::size_t id) const {
   Cached& c = *cache_[id];
   std::lock_guard<std::mutex> once(c.compute);
@@ -552,7 +557,7 @@ json WorkbenchApi::verdict_json(std::size_t id) const {
   if (!have) {
     // Computed once per version of the data, on the first request: a fit takes seconds.
     const auto t0 = std::chrono::steady_clock::now();
-    have = verdict_(snap->data, loops_[id].op_range.value_or(model_options_.range));
+    have = verdict_(snap->data, options_of(id).range);
     seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::lock_guard<std::mutex> lock(c.value);
     c.verdict = have;

@@ -131,6 +131,11 @@ TEST_CASE("the drifting-load predictor tells a wandering load from an integratin
     REQUIRE(drift.ok);
     CHECK(drift.differenced_input);
     CHECK(drift.parameters + 1 == rest.parameters);
+    // prediction_bic_change is that difference of BICs.
+    CHECK(prediction_bic_change(drift, rest) == doctest::Approx(bic(drift) - bic(rest)));
+    CHECK(prediction_bic_change(rest, free, 2.0) ==
+          doctest::Approx(bic(rest) - bic(free) +
+                          2.0 * std::log(static_cast<double>(rest.estimation_samples))));
     if (integrates) {
       CHECK(bic(rest) < bic(free) - 2.0);     // A(1) = 0 holds
       CHECK(bic(drift) > bic(rest) + 100.0);  // x's level drives PV's rate

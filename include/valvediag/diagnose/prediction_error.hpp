@@ -60,4 +60,15 @@ struct PredictionGain {
 };
 PredictionGain prediction_gain(const PredictionError& model, const PredictionError& reference);
 
+// The change of BIC from `reference` to `model` on the estimation part, n ln(variance ratio) +
+// (k - k_ref + extra_parameters) ln n: the predictors' own coefficients counted (an integrating
+// one has fewer) and `extra_parameters` besides (an effect's own). NaN unless both are ok on the
+// same samples.
+double prediction_bic_change(const PredictionError& model, const PredictionError& reference,
+                             double extra_parameters = 0.0);
+// The likelihood-ratio statistic on the held-out part, n ln(variance ratio); NaN unless both
+// have the same held-out samples.
+double prediction_validation_deviance(const PredictionError& model,
+                                      const PredictionError& reference);
+
 }  // namespace valvediag

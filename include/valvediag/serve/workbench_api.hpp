@@ -159,6 +159,8 @@ class WorkbenchApi {
   ApiResponse submit(const ApiRequest& req, std::size_t id) const;
   nlohmann::json loops_json() const;
   nlohmann::json verdict_json(std::size_t id) const;
+  // The session's options for loop id: its own OP span when it has one (ServedLoop::op_range).
+  ModelOptions options_of(std::size_t id) const;
   bool authorized(const ApiRequest& req) const;
 
   std::vector<ServedLoop> loops_;
