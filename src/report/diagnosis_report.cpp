@@ -63,8 +63,9 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
   o << "findings (most likely missing first: among valve, dead-time and process-lag effects, "
        "the lower PE BIC (the one-step prediction of PV), valves with memory by their nested "
        "test, a process lag above an actuator lag that commutes with it; where a load or an "
-       "integrator stands among them: of two unsupported, one that prediction shows evidence "
-       "for (an integrator: its restriction holds) above one it shows none for, else a clearly "
+       "integrator stands among them: one that prediction shows evidence for (an integrator: "
+       "its restriction holds) above a load whose output BIC refutes it and, of two "
+       "unsupported, above one it shows none for, else a clearly "
        "larger gain on both parts, else fewer parameters, else the higher score):\n";
   o << "  rank  effect          score  gain (val / est)    PE BIC    evidence\n";
   int rank = 0;
