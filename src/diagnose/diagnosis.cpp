@@ -707,7 +707,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
         // The valve's or lag's parameters, and the predictor's own difference: an integrating
         // one has one coefficient fewer (the restriction A(1) = 0 is what `integrator` claims).
         f.prediction_bic_change =
-            prediction_bic_change(pe, pe_model, effect_parameter_count(names[i], t, Ts));
+            prediction_bic_change(pe, pe_model, added_parameter_count(names[i], t, step.fit, Ts));
         f.prediction_validation_deviance_change = prediction_validation_deviance(pe, pe_model);
         // The integrator's unit root tested against a drifting load's (prediction_evidence).
         if (names[i] == "integrator" && pe.integrating && !pe_model.integrating &&
@@ -749,7 +749,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (std::isfinite(ref.validation))
         f.validation_gain_percent = finite_or(k.validation, -1e9) - ref.validation;
     }
-    f.parameter_count = effect_parameter_count(names[i], t, Ts);
+    f.parameter_count = added_parameter_count(names[i], t, step.fit, Ts);
     if (ref.output.size() == y.size() && ref.estimation_end < y.size() &&
         ref_from + 1 < ref.estimation_end) {
       // Fitness is 100 (1 - |e| / |y - mean|) on each part: the ratio of what the two leave is
@@ -842,8 +842,8 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       const ModelFit& ref = over_trial ? nt : step.fit;
       if (beyond > 0) {
         const ModelFit& pt = fits[static_cast<std::size_t>(pr - step.findings.data())];
-        const double dof = effect_parameter_count("preisach", pt, Ts) -
-                           (over_trial ? effect_parameter_count(nf.effect, nt, Ts) : 0.0);
+        const double dof = added_parameter_count("preisach", pt, step.fit, Ts) -
+                           (over_trial ? added_parameter_count(nf.effect, nt, step.fit, Ts) : 0.0);
         // On what the gains measure, as nested_winners.
         const JudgedFit jr = judged(ref, y, step.judge), jp = judged(pt, y, step.judge);
         lr_passes =
@@ -869,7 +869,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   const double margin = opt.min_gain_percent;
   std::map<std::string, double> size;
   for (std::size_t i = 0; i < fits.size(); ++i)
-    size[names[i]] = effect_parameter_count(names[i], fits[i], Ts);
+    size[names[i]] = std::max(0.0, added_parameter_count(names[i], fits[i], step.fit, Ts));
   // Nested trials (a deadband is a stiction without the jump) are ranked by the nested models'
   // test, not by scores: the residual hints point alike at both, and the wider model, fitting at
   // least as well, would win every near tie (measured: deadbands named stiction on an

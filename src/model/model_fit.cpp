@@ -770,6 +770,14 @@ double effect_parameter_count(const std::string& effect, const ModelFit& fit, do
   return 1.0;  // deadband, characteristic, actuator-lag, delay
 }
 
+double added_parameter_count(const std::string& effect, const ModelFit& trial,
+                             const ModelFit& model, double Ts) {
+  double k = effect_parameter_count(effect, trial, Ts);
+  for (const auto& e : model.effects)
+    if (e.name != effect && !trial.spec.has(e.name)) k -= effect_parameter_count(e.name, model, Ts);
+  return k;
+}
+
 LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, std::size_t N) {
   LinearOptions lo;
   lo.range = opt.structure;

@@ -562,6 +562,10 @@ TEST_CASE("preisach: position-dependent friction on the asymmetric valve" *
   CHECK(param(p, "preisach", "position") > 15.0);
   CHECK(param(p, "preisach", "position") < 50.0);
   CHECK(effect_parameter_count("preisach", p, d.sample_period()) == 5.0);
+  // As a trial on the stiction model it takes He's place: it adds its five less He's two.
+  CHECK(effect_parameter_count("stiction", h, d.sample_period()) == 2.0);
+  CHECK(added_parameter_count("preisach", p, h, d.sample_period()) == 3.0);
+  CHECK(added_parameter_count("stiction", h, fit(d, "linear", split()), d.sample_period()) == 2.0);
   const ModelFit a = fit(d, "preisach", split());
   CHECK(to_string(a.spec) == "preisach");
   CHECK(a.effects[0].variant == "position-dependent");

@@ -54,7 +54,8 @@ struct Finding {
   // The gains as likelihoods (what the judge's errors, below, measure): the change of BIC on the
   // estimation part, 2 n ln(error left by the trial / by the model) + k ln n, and of the deviance
   // 2 n ln(...) on the held-out part, each n the model's effective residual samples on that part
-  // (effective_sample_size: a slow error counts once) and k the effect's free parameters.
+  // (effective_sample_size: a slow error counts once) and k the free parameters the trial adds
+  // (added_parameter_count).
   // Negative: the trial explains more than its parameters cost. NaN when a fit failed.
   double parameter_count = std::numeric_limits<double>::quiet_NaN();
   double output_bic_change = std::numeric_limits<double>::quiet_NaN();

@@ -190,6 +190,12 @@ BandInterval band_interval(const std::vector<double>& u, const std::vector<doubl
 // charge flexible effects (Occam's tie-breaks, BIC).
 double effect_parameter_count(const std::string& effect, const ModelFit& fit, double Ts);
 
+// Free parameters a trial with `effect` has beyond `model`: the effect's own less those of the
+// model's effects the trial no longer has (`preisach` takes the place of a fitted `stiction` or
+// `deadband`: add_effect).
+double added_parameter_count(const std::string& effect, const ModelFit& trial,
+                             const ModelFit& model, double Ts);
+
 // The linear options fit_model uses for a spec (structure range widened by delay/order,
 // integrator, disturbance, estimation window), for callers that reuse ArxEstimator.
 LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, std::size_t N);
