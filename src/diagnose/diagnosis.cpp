@@ -696,6 +696,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     const JudgedFit& ref = same_samples[i] ? judged_refits.at(same_samples[i]) : judged_model;
     const std::size_t ref_from =
         step.judge.horizon > 0 ? ref.from : std::max(ref.from, t.first_sample);
+    f.parameter_count = added_parameter_count(names[i], t, step.fit, Ts);
     if (pe_model.ok) {
       const PredictionError pe = refits[i].ok ? refits[i].error : prediction_of(t);
       predictions[i] = pe;
@@ -706,8 +707,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (pe.ok) {
         // The valve's or lag's parameters, and the predictor's own difference: an integrating
         // one has one coefficient fewer (the restriction A(1) = 0 is what `integrator` claims).
-        f.prediction_bic_change =
-            prediction_bic_change(pe, pe_model, added_parameter_count(names[i], t, step.fit, Ts));
+        f.prediction_bic_change = prediction_bic_change(pe, pe_model, f.parameter_count);
         f.prediction_validation_deviance_change = prediction_validation_deviance(pe, pe_model);
         // The integrator's unit root tested against a drifting load's (prediction_evidence).
         if (names[i] == "integrator" && pe.integrating && !pe_model.integrating &&
@@ -749,7 +749,6 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
       if (std::isfinite(ref.validation))
         f.validation_gain_percent = finite_or(k.validation, -1e9) - ref.validation;
     }
-    f.parameter_count = added_parameter_count(names[i], t, step.fit, Ts);
     if (ref.output.size() == y.size() && ref.estimation_end < y.size() &&
         ref_from + 1 < ref.estimation_end) {
       // Fitness is 100 (1 - |e| / |y - mean|) on each part: the ratio of what the two leave is
@@ -868,8 +867,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // parts of the record).
   const double margin = opt.min_gain_percent;
   std::map<std::string, double> size;
-  for (std::size_t i = 0; i < fits.size(); ++i)
-    size[names[i]] = std::max(0.0, added_parameter_count(names[i], fits[i], step.fit, Ts));
+  for (const auto& f : step.findings) size[f.effect] = std::max(0.0, f.parameter_count);
   // Nested trials (a deadband is a stiction without the jump) are ranked by the nested models'
   // test, not by scores: the residual hints point alike at both, and the wider model, fitting at
   // least as well, would win every near tie (measured: deadbands named stiction on an
