@@ -165,6 +165,22 @@ struct Driver {
   json script(const std::string& js) {
     return session_call("POST", "/execute/sync", {{"script", js}, {"args", json::array()}});
   }
+  // Clicks the element `css` selects. The page redraws its pickers and tables from the server's
+  // answers, so an element found a moment before may be gone: then it is found again.
+  void click(const std::string& css) {
+    for (int attempt = 0;; ++attempt) {
+      const json e = session_call("POST", "/element", {{"using", "css selector"}, {"value", css}});
+      const std::string path =
+          "/session/" + session + "/element/" + e[kElement].get<std::string>() + "/click";
+      const httplib::Result r = http->Post(path, "{}", "application/json");
+      REQUIRE_MESSAGE(r, "WebDriver POST " << path << ": no answer");
+      if (r->status == 200) return;
+      const bool stale =
+          json::parse(r->body)["value"].value("error", "") == "stale element reference";
+      REQUIRE_MESSAGE((stale && attempt < 5), "WebDriver click on " << css << ": " << r->body);
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
   // Waits until `js` returns something other than null or false; its value.
   json wait_for(const std::string& js, double limit_s, const std::string& what) {
     const auto end = Clock::now() + std::chrono::duration<double>(limit_s);
@@ -248,10 +264,7 @@ TEST_CASE(
   CHECK(ladder0 == 1);
 
   // Add the top finding: the ladder grows by its step.
-  const json button = d.session_call(
-      "POST", "/element",
-      {{"using", "css selector"}, {"value", "#findings tbody tr:first-child button.add"}});
-  d.session_call("POST", "/element/" + button[kElement].get<std::string>() + "/click");
+  d.click("#findings tbody tr:first-child button.add");
   const json rows = d.wait_for(
       "const rows = [...document.querySelectorAll('#ladder tbody tr')];"
       "return rows.length >= 2 ? rows.map((r) => [r.dataset.model, Number(r.dataset.validation)])"
@@ -348,9 +361,7 @@ TEST_CASE(
   CHECK(look_at(zoomed).content_share > 0.2);
 
   // Remove goes back down: the ladder's third step is the linear model again.
-  const json remove =
-      d.session_call("POST", "/element", {{"using", "css selector"}, {"value", "#remove-btn"}});
-  d.session_call("POST", "/element/" + remove[kElement].get<std::string>() + "/click");
+  d.click("#remove-btn");
   const json third = d.wait_for(
       "const rows = document.querySelectorAll('#ladder tbody tr');"
       "return rows.length >= 3 ? rows[2].dataset.model : null;",
@@ -362,10 +373,7 @@ TEST_CASE(
   // Remove's job, then the diagnosis of the model it left (a job done moves A to the last step).
   d.wait_for("return wb.history.length >= 5 && " + idle + ";", 120.0, "the diagnosis after Remove");
   const auto pick = [&](const std::string& select, const std::string& value) {
-    const json option = d.session_call(
-        "POST", "/element",
-        {{"using", "css selector"}, {"value", "#" + select + " option[value=\"" + value + "\"]"}});
-    d.session_call("POST", "/element/" + option[kElement].get<std::string>() + "/click");
+    d.click("#" + select + " option[value=\"" + value + "\"]");
   };
   pick("model-a", "1");
   d.wait_for(
@@ -436,9 +444,7 @@ TEST_CASE(
             .find("(for the next jobs)") != std::string::npos);
   // The next job, a diagnosis of model A's model, asks for that share and fits with it.
   const std::size_t jobs_before = d.script("return wb.history.length;").get<std::size_t>();
-  const json diagnose =
-      d.session_call("POST", "/element", {{"using", "css selector"}, {"value", "#diagnose-btn"}});
-  d.session_call("POST", "/element/" + diagnose[kElement].get<std::string>() + "/click");
+  d.click("#diagnose-btn");
   d.wait_for("return wb.history.length > " + std::to_string(jobs_before) + " && " + idle + ";",
              120.0, "the diagnosis with the dragged split");
   CHECK(d.script("return wb.jobs[wb.jobs.length - 1].validate;") == share);

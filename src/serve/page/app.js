@@ -815,18 +815,25 @@ async function runJob(body, text, rediagnose = false) {
     }
   }
   wb.job = null;
-  wb.history.push(text + ': ' + st.state);
   $('job').hidden = true;
-  setBusy(false);
   if (st.state === 'failed') showError(text + ' failed: ' + st.error);
   if (st.state === 'cancelled') showError(text + ': cancelled');
-  if (wb.loop.id !== id) return;
-  if (st.state === 'done') {
+  // Idle only once the new ladder and diagnosis are drawn: a click before would land on a
+  // picker or a finding that is about to be replaced.
+  if (st.state === 'done' && wb.loop.id === id) {
     wb.followLast = true;
     wb.compareChoice = 'auto';  // the new model beside the one before it
-    await loadLadder();
-    await loadDiagnosis();
-    if (rediagnose) runJob({ action: 'diagnose' }, 'diagnosing ' + wb.shown.model);
+    try {
+      await loadLadder();
+      await loadDiagnosis();
+    } catch (e) {
+      showError(e.message);
+    }
+  }
+  wb.history.push(text + ': ' + st.state);
+  setBusy(false);
+  if (st.state === 'done' && wb.loop.id === id && rediagnose) {
+    runJob({ action: 'diagnose' }, 'diagnosing ' + wb.shown.model);
   }
 }
 
