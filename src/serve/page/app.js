@@ -29,6 +29,18 @@ function fmt(x, digits = 1) {
   return x === null || x === undefined || !isFinite(x) ? '-' : Number(x).toFixed(digits);
 }
 
+// A sample period as engineers write it: 5 ms, 0.5 s, 2 s (fixed decimals would show 5 ms as 0.01 s).
+function period(s) {
+  if (!(s > 0) || !isFinite(s)) return '-';
+  return s < 0.1 ? Number((1000 * s).toPrecision(3)) + ' ms' : Number(s.toPrecision(3)) + ' s';
+}
+
+// A time in seconds: whole seconds from 100 s on, else three significant digits.
+function seconds(x) {
+  if (x === null || x === undefined || !isFinite(x)) return '-';
+  return Math.abs(x) >= 100 ? x.toFixed(0) : String(Number(x.toPrecision(3)));
+}
+
 function signed(x, digits = 1) {
   if (x === null || x === undefined || !isFinite(x)) return '';
   return (x > 0 ? '+' : '') + Number(x).toFixed(digits);
@@ -71,7 +83,7 @@ async function loadLoops() {
   for (const l of wb.loops) {
     const li = el('li', { 'data-id': l.id },
       el('div', { class: 'name', textContent: l.name }),
-      el('div', { class: 'muted', textContent: l.samples + ' samples, ' + fmt(l.sample_period_s, 2) + ' s' }),
+      el('div', { class: 'muted', textContent: l.samples + ' samples, ' + period(l.sample_period_s) }),
       el('div', { class: 'muted loop-verdict', textContent: l.verdict ? 'verdict: ' + l.verdict : '' }));
     li.onclick = () => selectLoop(l.id);
     list.append(li);
@@ -91,7 +103,7 @@ function setBreakable(node, text) {
 }
 function loopInfo(l) {
   return (l.live ? 'recording ' : l.source.split('/').pop() + ': ') + l.samples + ' samples every ' +
-    fmt(l.sample_period_s, 2) + ' s, t ' + fmt(l.start_s, 0) + ' to ' + fmt(l.end_s, 0) + ' s' +
+    period(l.sample_period_s) + ', t ' + seconds(l.start_s) + ' to ' + seconds(l.end_s) + ' s' +
     (l.start_clock ? ' (from ' + l.start_clock + ')' : '');
 }
 
@@ -858,7 +870,7 @@ async function pollLive() {
     showLive(st);
     for (const l of loops.loops) {
       const li = document.querySelector('#loop-list li[data-id="' + l.id + '"] .muted');
-      if (li) li.textContent = l.samples + ' samples, ' + fmt(l.sample_period_s, 2) + ' s';
+      if (li) li.textContent = l.samples + ' samples, ' + period(l.sample_period_s);
       const i = wb.loops.findIndex((x) => x.id === l.id);
       if (i >= 0) wb.loops[i] = l;
     }
