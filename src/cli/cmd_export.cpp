@@ -9,7 +9,8 @@
 namespace valvediag::cli {
 
 RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const std::string& from,
-                          const std::string& to, std::int64_t run, std::size_t max_rows) {
+                          const std::string& to, std::int64_t run, std::size_t max_rows,
+                          std::size_t bridge_ticks) {
   auto seconds = [](const std::string& opt, const std::string& v) -> std::optional<double> {
     if (v.empty()) return std::nullopt;
     try {
@@ -22,12 +23,15 @@ RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const 
   };
   if (loop.empty()) throw UsageError("--db needs --loop NAME");
   try {
-    return read_recorded_loop(db, loop, seconds("--from", from), seconds("--to", to), run, false, 0,
-                              max_rows);
+    return read_recorded_loop(db, loop, seconds("--from", from), seconds("--to", to), run, false,
+                              bridge_ticks, max_rows);
   } catch (const DataError&) {
     throw;  // names the run, loop and tick already
   } catch (const RecordingGapError& e) {
-    throw UsageError(e.what());
+    throw UsageError(std::string(e.what()) +
+                     "; or fill the short ones by linear interpolation with --bridge-gaps N "
+                     "(ticks; sweep and serve fill " +
+                     std::to_string(kBridgedTicks) + ")");
   } catch (const std::runtime_error& e) {
     throw UsageError(e.what());  // no such file, loop or run: the user's input
   }
@@ -41,13 +45,15 @@ void add_export(CLI::App& app, int& exit_code) {
       "  valvediag export --db site.sqlite --loop FIC101 --from 600 --to 1800 --out part.csv\n"
       "  valvediag export --db site.sqlite --loop FIC101 --run 2 --out run2.csv\n"
       "t is in seconds from the start of the recording. Ranges with gaps (ticks without good OP "
-      "and PV) are refused,\nnaming the gaps and the longest clean stretch. Which run is read is "
+      "and PV) are refused,\nnaming the gaps and the longest clean stretch, unless --bridge-gaps "
+      "N fills those of at most N ticks.\nWhich run is read is "
       "said on stderr, with the loop's\nother runs; a --run that does not hold the loop lists "
       "them.");
   struct Args {
     std::string db, loop, from, to, out;
     std::int64_t run = 0;
     std::size_t max_rows = kDefaultMaxRows;
+    std::size_t bridge_gaps = 0;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("--db", a->db, "SQLite recording")->required();
@@ -59,8 +65,10 @@ void add_export(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", a->out, "CSV file to write")->required();
   // The reader's bound on memory; its refusal names this option, so export must take it.
   add_max_rows_option(cmd, a->max_rows, "a range");
+  add_bridge_gaps_option(cmd, a->bridge_gaps);
   cmd->callback([a, &exit_code] {
-    const RecordedLoop r = read_db_loop(a->db, a->loop, a->from, a->to, a->run, a->max_rows);
+    const RecordedLoop r =
+        read_db_loop(a->db, a->loop, a->from, a->to, a->run, a->max_rows, a->bridge_gaps);
     // Several runs (two recorders once, or one run after another) must not be merged silently.
     std::cerr << "export: loop " << a->loop << " of run " << r.run << " (started "
               << r.run_info.started_utc << ", " << r.run_info.status

@@ -40,11 +40,12 @@ void add_sweep_merge(CLI::App& app, int& exit_code);
 void add_trend(CLI::App& app, int& exit_code);
 void add_serve(CLI::App& app, int& exit_code);
 
-// A loop read from a recording (--db/--loop of export and fit); --from/--to in seconds. Gaps and
-// unknown names are UsageErrors, too many rows or an absurd value a DataError (exit status 2).
+// A loop read from a recording (--db/--loop of export and fit); --from/--to in seconds; gaps of
+// at most bridge_ticks ticks interpolated (--bridge-gaps). Other gaps and unknown names are
+// UsageErrors, too many rows or an absurd value a DataError (exit status 2).
 RecordedLoop read_db_loop(const std::string& db, const std::string& loop, const std::string& from,
                           const std::string& to, std::int64_t run = 0,
-                          std::size_t max_rows = kDefaultMaxRows);
+                          std::size_t max_rows = kDefaultMaxRows, std::size_t bridge_ticks = 0);
 // A duration option ("90s", "10m", "4h"): positive seconds, else a UsageError naming `opt`.
 double duration_option(const std::string& opt, const std::string& v);
 // "A,B,,C" -> {A, B, C}: the --loops lists of record and sweep.

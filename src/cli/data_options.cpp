@@ -36,7 +36,17 @@ void add_data_options(CLI::App* cmd, DataOptions& d) {
       ->group(g);
   cmd->add_option("--from", d.from, "with --db: start, s from the recording's start")->group(g);
   cmd->add_option("--to", d.to, "with --db: end, s from the recording's start")->group(g);
+  add_bridge_gaps_option(cmd, d.bridge_gaps);
   add_layout_options(cmd, d);
+}
+
+CLI::Option* add_bridge_gaps_option(CLI::App* cmd, std::size_t& ticks) {
+  return cmd
+      ->add_option("--bridge-gaps", ticks,
+                   "with --db: fill gaps of at most N ticks (missed, lost or bad samples) by "
+                   "linear interpolation between the good samples around them, and say where; "
+                   "sweep and serve fill 2 (default 0: a range with a gap is refused)")
+      ->group("Input");
 }
 
 void add_layout_options(CLI::App* cmd, DataOptions& d) {
@@ -151,11 +161,13 @@ LoopData load_data(DataOptions& d, std::vector<std::string>& notes) {
   if (d.data.empty() == d.db.empty())
     throw UsageError("give a CSV or .mat file, or --db site.sqlite --loop NAME (one of them)");
   if (!d.db.empty()) {
-    RecordedLoop r = read_db_loop(d.db, d.loop, d.from, d.to, 0, d.csv.max_rows);
+    RecordedLoop r = read_db_loop(d.db, d.loop, d.from, d.to, 0, d.csv.max_rows, d.bridge_gaps);
     notes.insert(notes.end(), r.notes.begin(), r.notes.end());
     d.run_read = r.run;
     return std::move(r.data);
   }
+  if (d.bridge_gaps > 0)
+    throw UsageError("--bridge-gaps goes with --db: a file's gaps are its own");
   const bool mat = is_mat_file(d.data);
   if ((!mat && !d.loop.empty()) || !d.from.empty() || !d.to.empty())
     throw UsageError(mat ? "--from and --to go with --db"

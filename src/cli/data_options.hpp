@@ -23,6 +23,7 @@ struct DataOptions {
   std::string decimal = ".";
   std::string db, loop, from, to;  // a recorded loop (valvediag record) instead of a file;
                                    // loop also names the loop inside a .mat file
+  std::size_t bridge_gaps = 0;     // with --db: gaps of at most this many ticks interpolated
   std::int64_t run_read = 0;       // set by load_data: the run a --db loop was read from
   // "auto" (sniff the CSV layout the options leave open) or "plain"; see CsvOptions::format.
   std::string format = "auto";
@@ -40,6 +41,8 @@ struct DataOptions {
 CLI::Option* add_max_rows_option(CLI::App* cmd, std::size_t& max_rows, const std::string& what);
 // Adds the positional DATA, --db/--loop/--from/--to and the CSV layout options (group "Input").
 void add_data_options(CLI::App* cmd, DataOptions& d);
+// --bridge-gaps N: a recording's gaps of at most N ticks interpolated (read_recorded_loop).
+CLI::Option* add_bridge_gaps_option(CLI::App* cmd, std::size_t& ticks);
 // Only the CSV layout options (columns, delimiter, header lines, time format, ...), for commands
 // that take several files (sweep).
 void add_layout_options(CLI::App* cmd, DataOptions& d);

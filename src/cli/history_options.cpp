@@ -38,6 +38,9 @@ std::string db_reading(const DataOptions& d) {
     std::snprintf(buf, sizeof buf, "%.15g", std::stod(*v));  // load_data checked it
     s += (s.empty() ? "" : " ") + std::string(opt) + " " + buf;
   }
+  // Interpolated samples are other data than a reading without them.
+  if (d.bridge_gaps > 0)
+    s += (s.empty() ? "" : " ") + std::string("--bridge-gaps ") + std::to_string(d.bridge_gaps);
   return s;
 }
 

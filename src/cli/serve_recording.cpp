@@ -64,8 +64,8 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
                        " has no samples to serve; record it first (valvediag record), or leave "
                        "it out with --loops");
     std::vector<std::string> notes = r->notes;
-    // Short gaps bridged (read_recorded_loop's note): `ladder --db` reads ranges without
-    // bridging, so it cannot read these samples back to find their history.
+    // Short gaps bridged (read_recorded_loop's note): the history's key and the commands that
+    // read these samples back say so (--bridge-gaps).
     const bool bridged = std::any_of(notes.begin(), notes.end(), [](const std::string& n) {
       return n.find("filled by linear interpolation") != std::string::npos;
     });
@@ -76,6 +76,7 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
     in.db = src.db;
     in.loop = name;
     in.run_read = r->run;
+    if (bridged) in.bridge_gaps = kBridgedTicks;
     if (d.t.front() > 0) {
       in.from = seconds_text(d.t.front());
       in.to = seconds_text(d.t.back());
@@ -89,7 +90,8 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
         return history_result(append_history_at(place, e));
       };
     }
-    const std::string range = in.from.empty() ? "" : " --from " + in.from + " --to " + in.to;
+    const std::string range = (in.from.empty() ? "" : " --from " + in.from + " --to " + in.to) +
+                              (bridged ? " --bridge-gaps " + std::to_string(kBridgedTicks) : "");
     loops.push_back(served_loop(name, std::move(d), w, notes));
     loops.back().history_writer = writer;
     for (const auto& n : notes)
@@ -97,13 +99,9 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
     std::cout << "loop " << name << ": run " << r->run << ", t "
               << loops.back().snapshot->data.t.front() << " to "
               << loops.back().snapshot->data.t.back() << " s";
-    if (!where.empty() && !bridged)
+    if (!where.empty())
       std::cout << "; model history: " << where << " (valvediag ladder --db " << src.db
                 << " --loop " << name << range << ")";
-    else if (!where.empty())
-      std::cout << "; model history: " << where << ", run " << r->run << ", reading '"
-                << range.substr(range.empty() ? 0 : 1)
-                << "' (gaps bridged: valvediag ladder --db cannot read these samples)";
     std::cout << "\n";
   }
   return loops;
