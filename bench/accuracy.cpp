@@ -54,6 +54,7 @@ std::string case_line(const BenchmarkOutcome& o) {
   std::string errs;
   for (const auto& e : o.errors)
     errs += strprintf(" %s %.3g/%.3g", e.name.c_str(), e.estimate, e.truth);
+  if (o.climbed) errs += " | --auto: " + o.climbed_model;
   const char* mark = o.loop.hidden.empty() ? (o.false_alarm ? "ALARM" : "ok")
                      : o.named_first       ? "FIRST"
                      : o.top_two           ? "top2"
@@ -82,7 +83,7 @@ std::vector<BenchmarkOutcome> run_range(const Range& r, const std::string& only,
     const std::string cat = benchmark_categories(seed, 1).front();
     BenchmarkOutcome o;
     try {
-      o = run_benchmark_case(draw_random_loop(seed, cat), opt);
+      o = run_benchmark_case(draw_random_loop(seed, cat), opt, /*climb=*/true);
     } catch (const std::exception& e) {
       o.loop.seed = seed;
       o.loop.category = cat;
@@ -226,6 +227,7 @@ nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, cons
          {"estimation_end", o.estimation_end},
          {"model_fitness_percent", num(o.judge.model_fitness_percent)},
          {"model_validation_fitness_percent", num(o.judge.model_validation_fitness_percent)},
+         {"climbed_model", o.climbed ? nlohmann::json(o.climbed_model) : nlohmann::json()},
          {"findings", findings}});
   }
   return cases;

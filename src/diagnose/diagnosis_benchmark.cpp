@@ -52,7 +52,7 @@ std::vector<std::string> benchmark_categories(std::uint64_t first_seed, std::uin
   return out;
 }
 
-BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt) {
+BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt, bool climb) {
   BenchmarkOutcome o;
   o.loop = loop;
   const auto t0 = std::chrono::steady_clock::now();
@@ -120,6 +120,13 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt)
         }
       }
       o.gains = o.true_gain >= 2.0;
+      if (climb && hidden.size() >= 2) {
+        const ModelSpec reached = verdict_model(
+            diagnose_auto(d.op, d.pv, d.sample_period(), parse_model_spec(loop.start_model), opt));
+        o.climbed = true;
+        o.climbed_model = to_string(reached);
+        for (const auto& h : hidden) o.climb_found += reached.has(h);
+      }
     }
   } catch (const std::exception& e) {
     o.error = e.what();
@@ -132,6 +139,7 @@ namespace {
 
 struct Tally {
   int cases = 0, first = 0, top2 = 0, gains = 0, supported = 0, alarms = 0, errors = 0;
+  int climbed = 0, climb_all = 0, climb_some = 0;  // cases climbed; all or some hidden added
   std::map<std::string, std::vector<double>> abs_err, rel_err;              // per parameter name
   std::map<std::string, std::vector<double>> refit_abs_err, refit_rel_err;  // of the refits
   double seconds = 0.0;
@@ -147,6 +155,9 @@ struct Tally {
     gains += o.gains;
     supported += o.true_supported;
     alarms += o.false_alarm;
+    climbed += o.climbed;
+    climb_all += o.climbed && o.climb_found == o.loop.hidden.size();
+    climb_some += o.climbed && o.climb_found > 0;
     for (const auto& e : o.errors) {
       if (!std::isfinite(e.estimate)) continue;
       abs_err[e.name].push_back(std::abs(e.estimate - e.truth));
@@ -218,6 +229,12 @@ std::string format_benchmark(const std::vector<BenchmarkOutcome>& outcomes,
   s += strprintf("%-15s %s %s %s %s\n", "all hidden", pct(fair.first, nf).c_str(),
                  pct(fair.top2, nf).c_str(), pct(fair.gains, nf).c_str(),
                  pct(fair.supported, nf).c_str());
+  for (const auto& [c, x] : t)
+    if (x.climbed > 0)
+      s += strprintf(
+          "%s, climbed from the start model (diagnose --auto): every hidden effect "
+          "added %s, at least one %s\n",
+          c.c_str(), pct(x.climb_all, x.climbed).c_str(), pct(x.climb_some, x.climbed).c_str());
   if (t.count("none")) {
     const Tally& x = t.at("none");
     s += strprintf("controls: %d, supported false findings %s", x.cases - x.errors,
@@ -283,6 +300,16 @@ std::string format_benchmark_pair(const std::vector<BenchmarkOutcome>& dev,
     return pct(x.alarms, x.cases - x.errors);
   };
   s += strprintf("%-15s | %-38s | %-38s\n", "false findings", alarms(d).c_str(), alarms(t).c_str());
+  auto climbs = [](const std::map<std::string, Tally>& m) {
+    int n = 0, all = 0;
+    for (const auto& [c, x] : m) {
+      n += x.climbed;
+      all += x.climb_all;
+    }
+    return n > 0 ? pct(all, n) : std::string("-");
+  };
+  if (climbs(d) != "-" || climbs(t) != "-")
+    s += strprintf("%-15s | %-38s | %-38s\n", "pair, --auto", climbs(d).c_str(), climbs(t).c_str());
   return s;
 }
 

@@ -39,6 +39,12 @@ struct BenchmarkOutcome {
   bool false_alarm = false;            // a control with a supported finding
   std::string false_effect;            // what it found
   std::vector<ParameterError> errors;  // the hidden effects' fitted parameters against the truth
+  // A case with two hidden effects, climbed (run_benchmark_case's `climb`): the model
+  // diagnose_auto reaches from the start model, and how many hidden effects it holds. One step
+  // ranks each effect against a model that lacks both; the climb adds one, then looks again.
+  bool climbed = false;
+  std::string climbed_model;
+  std::size_t climb_found = 0;
   // Each finding, ranked: effect:estimation gain/held-out gain/prediction BIC change/held-out
   // prediction gain.
   std::string detail;
@@ -50,8 +56,10 @@ struct BenchmarkOutcome {
   std::string error;  // the diagnosis threw: why
 };
 
-// Runs the diagnosis of one case (single step from its start model, its validation fraction).
-BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt = {});
+// Runs the diagnosis of one case (single step from its start model, its validation fraction);
+// `climb`: a case with two hidden effects is also climbed (diagnose_auto) from the start model.
+BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt = {},
+                                    bool climb = false);
 
 // The cases of a seed range: seed s draws category random_loop_categories()[s % 12], so any 12
 // consecutive seeds hold each category once.
