@@ -644,6 +644,24 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
   best.info.fitness_percent = kNaN;
   double best_score = -std::numeric_limits<double>::infinity();
 
+  // Progress: each (L, nk, na) group weighted by L's relays, L (L + 1) / 2.
+  const auto relays = [](int L) { return 0.5 * L * (L + 1); };
+  double work_total = 0.0, work_done = 0.0, reported = 0.0;
+  {
+    const int groups = identity ? 1 : (opt.nk_max - opt.nk_min + 1) * (opt.na_max - opt.na_min + 1);
+    for (int L : Ls) work_total += relays(L) * std::max(1, groups);
+  }
+  const auto group_done = [&](int L) {
+    if (!opt.progress) return;
+    const std::lock_guard<std::mutex> lock(mtx);
+    work_done += relays(L);
+    const double share = std::min(1.0, work_done / work_total);
+    if (share >= reported + 0.01 || share >= 1.0) {
+      reported = share;
+      opt.progress(share);
+    }
+  };
+
   parallel_for(Ls.size(), nthreads, [&](unsigned, std::size_t idx) {
     const int L = Ls[idx];
     const RelayDesign design(grid_for(u, opt, L), u, y, {0}, dopt);
@@ -679,6 +697,7 @@ IdentificationResult identify(const std::vector<double>& u, const std::vector<do
             local_best = std::move(c);
           }
         }
+        group_done(L);
       }
     }
     std::lock_guard<std::mutex> lock(mtx);

@@ -627,6 +627,10 @@ ModelFit fit_preisach(const std::vector<double>& u, const std::vector<double>& y
   fo.first_sample = opt.first_sample;
   fo.threads = opt.threads;
   fo.keep_all_configurations = true;
+  if (opt.progress)
+    fo.progress = [&opt](double share) {
+      opt.progress(share, "Preisach weights: the relay configurations of each L, nk and na");
+    };
   const std::vector<double> target = lo.integrating ? difference(y) : y;
   const IdentificationResult res = identify(u, target, fo);
   fit.evaluations = static_cast<int>(res.configurations.size());
@@ -964,8 +968,18 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
     f.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   };
   if (const EffectSpec* pe = spec.find("preisach"); pe && pe->variant != "position-dependent") {
-    ModelFit general = fit_preisach(u, y, Ts, spec, opt, fit);
-    if (pe->variant == "general") {
+    // auto fits two models: the progress of each fills half.
+    const auto half = [&opt](double lo) {
+      ModelFitOptions o = opt;
+      if (opt.progress)
+        o.progress = [&opt, lo](double share, const std::string& what) {
+          opt.progress(lo + 0.5 * share, what);
+        };
+      return o;
+    };
+    const bool both = pe->variant != "general";
+    ModelFit general = fit_preisach(u, y, Ts, spec, both ? half(0.0) : opt, fit);
+    if (!both) {
       finish(general);
       return general;
     }
@@ -974,7 +988,7 @@ ModelFit fit_model(const std::vector<double>& u, const std::vector<double>& y, d
     ModelSpec narrow = spec;
     for (auto& e : narrow.effects)
       if (e.name == "preisach") e.variant = "position-dependent";
-    ModelFit banded = fit_separable(u, y, Ts, narrow, opt, fit);
+    ModelFit banded = fit_separable(u, y, Ts, narrow, half(0.5), fit);
     banded.spec = spec;
     const std::size_t t0 = std::max(general.first_sample, banded.first_sample);
     const std::size_t t1 = std::min(general.estimation_end, banded.estimation_end);

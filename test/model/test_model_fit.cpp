@@ -607,6 +607,43 @@ TEST_CASE("a fit reports its valve search's progress, rising to the end, and the
   }
 }
 
+TEST_CASE("a Preisach fit reports its weights' progress, rising to 1; auto fills half with each") {
+  const LoopData d = run_scenario(scenario_by_name("paper-ex1"), 1, 2000);
+  ModelFitOptions small = split();
+  small.preisach_L_max = 6;
+  for (const char* spec : {"preisach:general", "preisach"}) {
+    CAPTURE(spec);
+    std::vector<std::pair<double, std::string>> calls;
+    ModelFitOptions o = small;
+    o.progress = [&calls](double share, const std::string& stage) {
+      calls.emplace_back(share, stage);
+    };
+    const ModelFit with = fit(d, spec, o);
+    const ModelFit without = fit(d, spec, small);
+    CHECK(with.fitness_percent == without.fitness_percent);  // reporting changes nothing
+    REQUIRE(calls.size() >= 5);
+    bool rising = true;
+    int weights_before_half = 0, after_half = 0;
+    for (std::size_t k = 0; k < calls.size(); ++k) {
+      rising = rising && (k == 0 || calls[k].first >= calls[k - 1].first);
+      const bool weights = calls[k].second.find("Preisach weights") != std::string::npos;
+      weights_before_half += weights && calls[k].first <= 0.5;
+      after_half += calls[k].first > 0.5;
+      CHECK(calls[k].first >= 0.0);
+      CHECK(calls[k].first <= 1.0);
+    }
+    CHECK(rising);
+    if (std::string(spec) == "preisach:general") {
+      CHECK(calls.back().first == 1.0);  // every configuration fitted
+      CHECK(calls.back().second.find("Preisach weights") != std::string::npos);
+    } else {
+      // auto: the weights fill the first half, the position-dependent friction's search the rest.
+      CHECK(weights_before_half >= 3);
+      CHECK(after_half >= 3);
+    }
+  }
+}
+
 TEST_CASE("fit_models runs independent fits in parallel with the same results") {
   const LoopData d = scenario_data("stenman", 2);
   const std::vector<ModelSpec> specs = {parse_model_spec("linear"), parse_model_spec("deadband"),

@@ -8,6 +8,7 @@
 // scored by the simulated-output fitness (eq 20); unstable fitted models are rejected.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -55,6 +56,9 @@ struct FitOptions {
   bool keep_all_configurations = true;
   // Set by another thread: identify() throws Cancelled (cancel.hpp) at its next structure.
   const std::atomic<bool>* cancel = nullptr;
+  // Called as the configurations are fitted (one call at a time, from identify()'s threads):
+  // the share of the work done, rising to 1 (each L weighted by its number of relays).
+  std::function<void(double)> progress;
 };
 
 // Checks the options alone; returns an empty string when they are usable, otherwise what is wrong.

@@ -74,8 +74,8 @@ struct ModelFitOptions {
   // Called as the valve search goes (one call at a time, from the fit's threads): the share of
   // it done, rising to 1, and what it is doing. A stage's share fills as its evaluations reach its
   // budget (a grid's points; a polish's most evaluations), so a polish that converges early
-  // jumps to the next stage. Not called by fit_models (its fits run side by side) nor for the
-  // Preisach weights (the core's identification).
+  // jumps to the next stage. For the Preisach weights (the core's identification), the share of
+  // its configurations fitted. Not called by fit_models (its fits run side by side).
   std::function<void(double, const std::string&)> progress;
   // Set by another thread: the fit throws Cancelled (core/cancel.hpp) at its next valve-search
   // evaluation or identify() structure. Every trial fit of a diagnosis shares DiagnoseOptions::fit.
