@@ -2,7 +2,8 @@
 # Speed of the identification: full default grid at several N, beside a straightforward baseline
 # (dense relay matrix, cold NNLS per solve) built from the same code, in one run. Then the
 # recorder's load benchmark: 50 loops x OP/PV/SP at 10 Hz from the simulated PLC over loopback
-# for LOAD_SECONDS (default 60) s, and the SQLite insert rate. Then the ARX structure search that
+# for LOAD_SECONDS (default 60) s, with the cores idle and then all kept busy, and the SQLite
+# insert rate. Then the ARX structure search that
 # every trial fit repeats, beside a plain scan of every structure (the same answer, checked;
 # SEARCH_REPS, default 5, runs). Then the sweep's throughput: six simulated loops swept on one
 # core (the baseline), with --jobs 1 (each loop's fits threaded over the cores) and with one loop
