@@ -24,15 +24,17 @@ namespace fs = std::filesystem;
 namespace {
 
 // One recording of `seconds` into `db`; the figures printed, prefixed by `what`.
-void record(const SiteConfig& site, SimPlc& plc, const std::string& db, double seconds, int loops,
+void record(const SiteConfig& site, SimPlc& plc, const std::string& db, double seconds,
             const char* what) {
+  const auto loops = static_cast<long long>(site.loops.size());
   RecorderOptions o;
   o.db_path = db;
   o.duration_s = seconds;
   Recorder rec(site, o, make_bus);
   std::atomic<bool> stop{false};
-  std::printf("load: %d loops x OP, PV, SP at 10 Hz over loopback Modbus TCP for %.0f s, %s ...\n",
-              loops, seconds, what);
+  std::printf(
+      "load: %lld loops x OP, PV, SP at 10 Hz over loopback Modbus TCP for %.0f s, %s ...\n", loops,
+      seconds, what);
   std::fflush(stdout);
   const RecorderStatus s = rec.run(stop);
   const BusStats bs = s.buses.at(0).second;
@@ -79,7 +81,7 @@ int main(int argc, char** argv) {
   plc.start();
   for (auto& b : site.buses) b.port = plc.port();
 
-  record(site, plc, (dir / "load.sqlite").string(), seconds, loops, "the cores idle");
+  record(site, plc, (dir / "load.sqlite").string(), seconds, "the cores idle");
   {
     // The simulated PLC shares the busy cores too, so its replies slow as well: an upper bound.
     const unsigned busy = std::max(1u, std::thread::hardware_concurrency()) + 1;
@@ -91,7 +93,7 @@ int main(int argc, char** argv) {
         while (!done.load(std::memory_order_relaxed)) x = std::sqrt(x * x + 1.0);
       });
     const std::string what = std::to_string(busy) + " threads keeping every core busy";
-    record(site, plc, (dir / "load_busy.sqlite").string(), seconds, loops, what.c_str());
+    record(site, plc, (dir / "load_busy.sqlite").string(), seconds, what.c_str());
     done = true;
     for (auto& t : spin) t.join();
   }

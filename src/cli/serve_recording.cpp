@@ -1,7 +1,6 @@
 // The workbench's loops from a recording: `serve --db` (each loop's latest window, as a sweep
 // reads it) and `serve --config --db` (the recorder runs in the server and the loops grow as it
 // records). The recorder only reads from the PLC (bus.hpp has no write).
-#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -64,11 +63,9 @@ std::vector<serve::ServedLoop> recorded_loops_to_serve(const RecordingSource& sr
                        " has no samples to serve; record it first (valvediag record), or leave "
                        "it out with --loops");
     std::vector<std::string> notes = r->notes;
-    // Short gaps bridged (read_recorded_loop's note): the history's key and the commands that
-    // read these samples back say so (--bridge-gaps).
-    const bool bridged = std::any_of(notes.begin(), notes.end(), [](const std::string& n) {
-      return n.find("filled by linear interpolation") != std::string::npos;
-    });
+    // Short gaps bridged: the history's key and the commands that read these samples back say
+    // so (--bridge-gaps).
+    const bool bridged = r->bridged_gaps > 0;
     LoopData d = std::move(r->data);
     // The history `fit --db site.sqlite --loop NAME --from A --to B` keeps for these samples:
     // the recording's table model_history (the state directory when the file cannot take it).

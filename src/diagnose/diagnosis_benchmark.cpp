@@ -308,8 +308,8 @@ std::string format_benchmark_pair(const std::vector<BenchmarkOutcome>& dev,
     }
     return n > 0 ? pct(all, n) : std::string("-");
   };
-  if (climbs(d) != "-" || climbs(t) != "-")
-    s += strprintf("%-15s | %-38s | %-38s\n", "pair, --auto", climbs(d).c_str(), climbs(t).c_str());
+  if (const std::string cd = climbs(d), ct = climbs(t); cd != "-" || ct != "-")
+    s += strprintf("%-15s | %-38s | %-38s\n", "pair, --auto", cd.c_str(), ct.c_str());
   return s;
 }
 

@@ -525,6 +525,7 @@ RecordedLoop read_recorded_loop(const std::string& db_path, const std::string& n
       if (!sp.empty()) sp2.push_back(sp[i]);
       if (!mv.empty()) mv2.push_back(mv[i]);
     }
+    out.bridged_gaps = n_bridged;
     if (n_bridged > 0) {
       while (g < gaps.size()) kept.push_back(gaps[g++]);
       // Gaps before the first or after the last good sample (or longer ones) are not bridged.

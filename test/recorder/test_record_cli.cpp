@@ -7,7 +7,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -21,6 +20,7 @@
 #include "../common/sqlite_exec.hpp"
 #include "valvediag/drivers/sim_plc.hpp"
 #include "valvediag/recorder/recorder.hpp"
+#include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 namespace fs = std::filesystem;
@@ -423,10 +423,8 @@ TEST_CASE(
     "it") {
   // The paper's Example 1 loop, 1200 samples at 0.5 s, stored as a recording with one row lost
   // (tick 500, a kill -9 before a commit) and two ticks without good OP and PV (700, 701).
-  const fs::path csv = kTmp / "bridge_ex1.csv";
-  Result r = run({"simulate", "--scenario", "paper-ex1", "--seed", "1", "--samples", "1200",
-                  "--out", csv.string()});
-  REQUIRE_MESSAGE(r.status == 0, r.out);
+  const LoopData ex1 = run_scenario(scenario_by_name("paper-ex1"), 1, 1200);
+  REQUIRE(ex1.size() == 1200);
   const std::string db = fresh("bridge_cli.sqlite");
   {
     RecordingDb rec(db);
@@ -436,29 +434,23 @@ TEST_CASE(
     loop.sample_period_s = 0.5;
     loop.points[static_cast<std::size_t>(PointName::sp)].present = true;
     const std::int64_t id = rec.add_loop(run_id, loop);
-    std::ifstream in(csv);
-    std::string line;
-    std::getline(in, line);  // t,op,pv,sp,mv
     std::vector<SampleRow> rows;
-    for (std::int64_t k = 0; std::getline(in, line); ++k) {
-      std::istringstream f(line);
-      std::array<double, 5> v{};
-      char comma = 0;
-      f >> v[0] >> comma >> v[1] >> comma >> v[2] >> comma >> v[3];
+    for (std::size_t k = 0; k < ex1.size(); ++k) {
       if (k == 500) continue;
       SampleRow row;
       row.loop_id = id;
-      row.tick = k;
+      row.tick = static_cast<std::int64_t>(k);
       const Quality q = k == 700 || k == 701 ? Quality::comm_error : Quality::good;
-      row.values[0] = {q == Quality::good ? v[1] : std::nan(""), q};
-      row.values[1] = {q == Quality::good ? v[2] : std::nan(""), q};
-      row.values[2] = {v[3], Quality::good};
+      row.values[0] = {q == Quality::good ? ex1.op[k] : std::nan(""), q};
+      row.values[1] = {q == Quality::good ? ex1.pv[k] : std::nan(""), q};
+      row.values[2] = {ex1.sp[k], Quality::good};
       rows.push_back(row);
     }
     REQUIRE(rows.size() == 1199);
     rec.insert(rows);
     rec.end_run(run_id, "done");
   }
+  Result r;
   const std::vector<std::string> small{"--na-max", "1", "--nb-max", "1",
                                        "--nk-max", "6", "--L-max",  "6"};
   auto with = [](std::vector<std::string> a, const std::vector<std::string>& b) {
@@ -495,8 +487,8 @@ TEST_CASE(
   r = run({"export", "--db", db, "--loop", "FIC101", "--bridge-gaps", "2", "--out", out.string()});
   CHECK(r.status == 0);
   CHECK(r.out.find("1200 samples") != std::string::npos);
-  // A file has no recorded gaps to fill.
-  r = run({"fit", csv.string(), "--bridge-gaps", "2", "--no-history"});
+  // A file has no recorded gaps to fill (the export just written).
+  r = run({"fit", out.string(), "--bridge-gaps", "2", "--no-history"});
   CHECK(r.status == 2);
   CHECK(r.out.find("--bridge-gaps goes with --db") != std::string::npos);
 }

@@ -392,6 +392,8 @@ TEST_CASE("short gaps are bridged by interpolation when asked; long ones still s
   const RecordedLoop b = read_recorded_loop(db, "loop-with-short-gaps", std::nullopt, std::nullopt,
                                             0, true, kBridgedTicks);
   CHECK(b.data.size() == 55);
+  CHECK(b.bridged_gaps == 3);
+  CHECK(plain.bridged_gaps == 0);
   CHECK(exact(b, 45));
   CHECK(note_with(b, "3 short gap(s) of at most 2 tick(s) (4 in all, at 10, 20, 60 s)"));
   CHECK(note_with(b, "using the longest clean stretch, 45 .. 99 s"));

@@ -111,6 +111,7 @@ struct RecordedLoop {
   double sample_period = 0.0;
   std::size_t rows = 0;
   std::vector<std::string> notes;  // e.g. "sp left out: 3 ticks without a good sp"
+  std::size_t bridged_gaps = 0;    // gaps filled by interpolation (read_recorded_loop's bridge)
 };
 // Reads loop `name` of run `run` (0: the latest run that recorded it) from `from_s` to `to_s`
 // (seconds since the run's start; nullopt: all). Throws RecordingGapError when OP or PV is not

@@ -83,7 +83,7 @@ async function loadLoops() {
   for (const l of wb.loops) {
     const li = el('li', { 'data-id': l.id },
       el('div', { class: 'name', textContent: l.name }),
-      el('div', { class: 'muted', textContent: l.samples + ' samples, ' + period(l.sample_period_s) }),
+      el('div', { class: 'muted', textContent: loopSize(l) }),
       el('div', { class: 'muted loop-verdict', textContent: l.verdict ? 'verdict: ' + l.verdict : '' }));
     li.onclick = () => selectLoop(l.id);
     list.append(li);
@@ -100,6 +100,10 @@ function setBreakable(node, text) {
     if (i > 0) node.appendChild(document.createElement('wbr'));
     node.appendChild(document.createTextNode(part));
   });
+}
+// A loop's line in the list: its samples and period (live loops' grow).
+function loopSize(l) {
+  return l.samples + ' samples, ' + period(l.sample_period_s);
 }
 function loopInfo(l) {
   return (l.live ? 'recording ' : l.source.split('/').pop() + ': ') + l.samples + ' samples every ' +
@@ -870,7 +874,7 @@ async function pollLive() {
     showLive(st);
     for (const l of loops.loops) {
       const li = document.querySelector('#loop-list li[data-id="' + l.id + '"] .muted');
-      if (li) li.textContent = l.samples + ' samples, ' + period(l.sample_period_s);
+      if (li) li.textContent = loopSize(l);
       const i = wb.loops.findIndex((x) => x.id === l.id);
       if (i >= 0) wb.loops[i] = l;
     }
