@@ -792,7 +792,12 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     const double rel = f.gain_percent / std::max(100.0 - base_score, 1.0);
     f.score = f.gain_percent > 0 ? 0.6 * std::clamp(rel / 0.3, 0.0, 1.0) + 0.4 * f.evidence
                                  : 0.15 * f.evidence;
-    f.supported = f.score >= opt.min_score && f.gain_percent >= opt.min_gain_percent;
+    // And the statistic that judges its kind does not refute it: an effect the one-step
+    // prediction sees must not raise that prediction's BIC (its parameters costing more than
+    // they explain). The simulated output's gains alone supported extra lags and frictions on
+    // control loops whose prediction they made worse (development controls, seeds 0-779).
+    f.supported = f.score >= opt.min_score && f.gain_percent >= opt.min_gain_percent &&
+                  !(judged_by_prediction(f.effect) && f.prediction_bic_change > 0);
     for (const auto& iv : step.residual.intervals)
       if (f.intervals.size() < 3) f.intervals.push_back(iv);
     for (const auto& g : step.residual.regions)
@@ -849,7 +854,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
             lr_refutes(y, jr.output, jp.estimation, jr.estimation, jr.from, jr.estimation_end, dof);
       }
       pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent &&
-                      beyond > 0 && lr_passes;
+                      !(pr->prediction_bic_change > 0) && beyond > 0 && lr_passes;
     }
   }
   // Scores saturate when the model leaves much to explain; among near-equal scores the larger
