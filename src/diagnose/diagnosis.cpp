@@ -47,11 +47,16 @@ double param(const std::vector<NamedValue>& p, const char* name, double fallback
 // One plain line an engineer can act on, with the trial fit's figures.
 std::string explain(const std::string& effect, const ModelFit& trial,
                     const std::vector<NamedValue>& p, const ModelSpec& model) {
-  const double Ts = 1.0;
-  (void)Ts;
+  // A band the trial fitted to nothing (under the 0.05 % the sentence shows) is said so: "OP
+  // must travel about 0.0 %" reads as a contradiction of the effect it names.
+  const auto none = [](double band) { return std::isfinite(band) && band < 0.05; };
   if (effect == "stiction") {
     const double fs = param(p, "fs"), fd = param(p, "fd");
     const double S = param(p, "S"), J = param(p, "J"), d = param(p, "d");
+    const double band = std::isfinite(S) ? S : std::isfinite(d) ? d : fs;
+    if (none(band))
+      return "valve sticks after reversals and then jumps: add `stiction` (this trial fitted no "
+             "band: the data here show none)";
     if (std::isfinite(S))
       return strprintf(
           "valve sticks: OP must travel about %.1f %% after a reversal before it moves, then it "
@@ -65,17 +70,19 @@ std::string explain(const std::string& effect, const ModelFit& trial,
     if (std::isfinite(fs))
       return strprintf(
           "valve sticks: OP must travel about %.1f %% after a reversal before it moves, then it "
-          "jumps about "
-          "%.1f %%: add `stiction`",
+          "jumps about %.1f %%: add `stiction`",
           fs, std::isfinite(fd) ? fs - fd : 0.0);
     return "valve sticks after reversals and then jumps: add `stiction`";
   }
   if (effect == "deadband") {
     const double d = param(p, "d");
+    if (none(d))
+      return "play in the valve linkage after reversals: add `deadband` (this trial fitted no "
+             "play: the data here show none)";
     return std::isfinite(d) ? strprintf(
                                   "play in the valve linkage: OP must travel about %.1f %% after a "
-                                  "reversal before "
-                                  "the valve follows, without a jump: add `deadband`",
+                                  "reversal before the valve follows, without a jump: add "
+                                  "`deadband`",
                                   d)
                             : "play in the valve linkage after reversals: add `deadband`";
   }

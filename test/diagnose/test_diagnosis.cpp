@@ -292,6 +292,27 @@ TEST_CASE("paper Example 1: stiction parameters, and preisach fits about equally
   CHECK(st->explanation.find("stiction") != std::string::npos);
 }
 
+// A trial whose band fits to nothing does not tell the user "OP must travel about 0.0 %": the
+// workbench showed that for the deadband trial on paper Example 1 (1500 samples) from `stiction`.
+TEST_CASE("a friction trial that fits no band says so instead of a band of 0.0 %") {
+  const LoopData data = run_scenario(named("paper-ex1"), 1, 1500);
+  const Diagnosis d =
+      diagnose(data.op, data.pv, data.sample_period(), parse_model_spec("stiction"));
+  const auto& f = d.last().findings;
+  const Finding* db = find(f, "deadband");
+  REQUIRE(db != nullptr);
+  double band = -1.0;
+  for (const auto& p : db->parameters)
+    if (p.name == "d") band = p.value;
+  REQUIRE(band >= 0.0);
+  REQUIRE(band < 0.05);  // the case this test is about
+  CHECK(db->explanation.find("fitted no play") != std::string::npos);
+  for (const auto& x : f) {
+    INFO(x.effect << ": " << x.explanation);
+    CHECK(x.explanation.find("about 0.0 %") == std::string::npos);
+  }
+}
+
 TEST_CASE("paper Example 1 over 50 minutes: `linear` has a stable fit, stiction is missing first" *
           valvediag::test::release_only()) {
   // 6000 samples of stick-slip cycles at a steady set point: least squares puts every linear
