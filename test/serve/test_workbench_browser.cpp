@@ -521,6 +521,13 @@ TEST_CASE(
       60.0, "the trends growing");
   MESSAGE("samples " << a[0] << " -> " << b[0] << ", last time " << a[1] << " s -> " << b[1]
                      << " s");
+  // No model yet: the model's panel shows the measured PV, and follows the recording too.
+  const json fit = d.wait_for(
+      "const g = wb.charts.fit; return !wb.shown && g && g.numRows() > 1 &&"
+      " g.getLabels()[1] === 'PV measured' && g.getValue(g.numRows() - 1, 0) >= " +
+          std::to_string(b[1].get<double>()) + " ? g.getValue(g.numRows() - 1, 0) : null;",
+      30.0, "the measured PV in the model's panel");
+  MESSAGE("model panel without a model: measured PV to " << fit << " s");
   // The loop list's entry says so too, with the sample period as set (5 ms, not 0.01 s).
   const json listed =
       d.script("return document.querySelector('#loop-list li .muted').textContent;");

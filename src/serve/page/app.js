@@ -285,9 +285,14 @@ function windowQuery(div) {
   return wb.window ? q + '&from=' + wb.window[0] + '&to=' + wb.window[1] : q;
 }
 
+// The trend chart's signals of loop l, in its column order.
+function trendNames(l) {
+  return ['op', 'pv', 'sp'].filter((n) => l.signals.includes(n));
+}
+
 async function drawTrends() {
   const l = wb.loop, div = $('trend-chart');
-  const names = ['op', 'pv', 'sp'].filter((n) => l.signals.includes(n));
+  const names = trendNames(l);
   if (!wb.charts.trend) {
     wb.charts.trend = makeChart(div, ['t (s)'].concat(names.map((n) => n.toUpperCase())),
       ['#1f77b4', '#d62728', '#2ca02c'].slice(0, names.length), { underlayCallback: shadeNextSplit });
@@ -329,7 +334,10 @@ async function drawModel() {
   showComparison();
   drawPhasePlots();
   if (!step) {
-    wb.charts.fit.updateOptions({ file: [[0, null, null]], labels: labels.slice(0, 3), colors: colors.slice(0, 2) });
+    // No model yet: the measured PV alone (from the trends' rows), what a model will be fitted to.
+    const pv = measuredPvRows();
+    wb.charts.fit.updateOptions({ file: pv.length ? pv : [[0, null]], labels: labels.slice(0, 2),
+      colors: colors.slice(0, 1), dateWindow: wb.window || [l.start_s, l.end_s] });
     wb.charts.residual.updateOptions({ file: [[0, null]], labels: resLabels.slice(0, 2), colors: resColors.slice(0, 1) });
     return;
   }
@@ -359,6 +367,13 @@ async function drawModel() {
   wb.charts.fit.updateOptions({ file: fit, labels, colors, dateWindow: dw });
   wb.charts.residual.updateOptions({ file: res, labels: resLabels, colors: resColors, dateWindow: dw });
   wb.charts.trend.updateOptions({});  // the split may have moved
+}
+
+// The measured PV of the loop's trend rows ([t, [lo, mean, hi]]), or none before they are read.
+function measuredPvRows() {
+  const l = wb.loop, k = trendNames(l).indexOf('pv');
+  if (k < 0 || !wb.trendCoarse || wb.trendCoarse.id !== l.id) return [];
+  return wb.trendCoarse.rows.map((r) => [r[0], r[k + 1]]);
 }
 
 // Measured and simulated PV, and model B's simulated PV when given (same buckets).
@@ -882,7 +897,10 @@ async function pollLive() {
     if (now && now.samples !== wb.loop.samples) {
       wb.loop = now;
       $('loop-info').textContent = loopInfo(now);
-      if (wb.dragShare === null) await drawTrends();  // not under a drag of the split
+      if (wb.dragShare === null) {  // not under a drag of the split
+        await drawTrends();
+        if (!wb.shown) await drawModel();  // no model yet: its panel shows the measured PV
+      }
     }
   } catch (e) {
     $('live-text').textContent = ' (the server did not answer: ' + e.message + ')';
