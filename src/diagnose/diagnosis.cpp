@@ -389,6 +389,12 @@ bool prediction_evidence(const Finding& f) {
   return f.prediction_validation_gain_percent > 0;
 }
 
+// The one-step prediction refutes the finding (an effect it judges whose BIC of it rises): such a
+// finding is not supported, whatever it gains on the simulated output.
+bool refuted_by_prediction(const Finding& f) {
+  return judged_by_prediction(f.effect) && f.prediction_bic_change > 0;
+}
+
 // Whether the statistic that judges the effect says its parameters cost more than they explain
 // (BIC above 0): the one-step prediction's for what it can see (judged_by_prediction); for a
 // load, which the prediction carries in PV's own past, the simulated output's on the estimation
@@ -397,7 +403,7 @@ bool prediction_evidence(const Finding& f) {
 // fits too (measured: controls' spline loads whiten the residual from 4-8 to 65-270 effective
 // samples, true loads' alike, so the trial's own count would pass every one).
 bool refuted_by_own_judge(const Finding& f) {
-  return judged_by_prediction(f.effect) ? f.prediction_bic_change > 0 : f.output_bic_change > 0;
+  return judged_by_prediction(f.effect) ? refuted_by_prediction(f) : f.output_bic_change > 0;
 }
 
 // Among the effects on the path from OP to PV that the one-step prediction shows evidence for
@@ -804,7 +810,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
     // they explain). The simulated output's gains alone supported extra lags and frictions on
     // control loops whose prediction they made worse (development controls, seeds 0-779).
     f.supported = f.score >= opt.min_score && f.gain_percent >= opt.min_gain_percent &&
-                  !(judged_by_prediction(f.effect) && f.prediction_bic_change > 0);
+                  !refuted_by_prediction(f);
     for (const auto& iv : step.residual.intervals)
       if (f.intervals.size() < 3) f.intervals.push_back(iv);
     for (const auto& g : step.residual.regions)
@@ -861,7 +867,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
             lr_refutes(y, jr.output, jp.estimation, jr.estimation, jr.from, jr.estimation_end, dof);
       }
       pr->supported = pr->score >= opt.min_score && pr->gain_percent >= opt.min_gain_percent &&
-                      !(pr->prediction_bic_change > 0) && beyond > 0 && lr_passes;
+                      !refuted_by_prediction(*pr) && beyond > 0 && lr_passes;
     }
   }
   // Scores saturate when the model leaves much to explain; among near-equal scores the larger

@@ -334,10 +334,7 @@ async function drawModel() {
   showComparison();
   drawPhasePlots();
   if (!step) {
-    // No model yet: the measured PV alone (from the trends' rows), what a model will be fitted to.
-    const pv = measuredPvRows();
-    wb.charts.fit.updateOptions({ file: pv.length ? pv : [[0, null]], labels: labels.slice(0, 2),
-      colors: colors.slice(0, 1), dateWindow: wb.window || [l.start_s, l.end_s] });
+    drawMeasuredPv();
     wb.charts.residual.updateOptions({ file: [[0, null]], labels: resLabels.slice(0, 2), colors: resColors.slice(0, 1) });
     return;
   }
@@ -369,11 +366,14 @@ async function drawModel() {
   wb.charts.trend.updateOptions({});  // the split may have moved
 }
 
-// The measured PV of the loop's trend rows ([t, [lo, mean, hi]]), or none before they are read.
-function measuredPvRows() {
+// No model yet: the model's panel shows the measured PV alone, what a model will be fitted to,
+// from the trends' rows ([t, [lo, mean, hi]]) as last read (no request of its own).
+function drawMeasuredPv() {
   const l = wb.loop, k = trendNames(l).indexOf('pv');
-  if (k < 0 || !wb.trendCoarse || wb.trendCoarse.id !== l.id) return [];
-  return wb.trendCoarse.rows.map((r) => [r[0], r[k + 1]]);
+  const rows = k >= 0 && wb.trendCoarse && wb.trendCoarse.id === l.id
+    ? wb.trendCoarse.rows.map((r) => [r[0], r[k + 1]]) : [[0, null]];
+  wb.charts.fit.updateOptions({ file: rows, labels: ['t (s)', 'PV measured'], colors: ['#d62728'],
+    dateWindow: wb.window || [l.start_s, l.end_s] });
 }
 
 // Measured and simulated PV, and model B's simulated PV when given (same buckets).
@@ -899,7 +899,7 @@ async function pollLive() {
       $('loop-info').textContent = loopInfo(now);
       if (wb.dragShare === null) {  // not under a drag of the split
         await drawTrends();
-        if (!wb.shown) await drawModel();  // no model yet: its panel shows the measured PV
+        if (!wb.shown && wb.charts.fit) drawMeasuredPv();  // no model yet: it grows too
       }
     }
   } catch (e) {
