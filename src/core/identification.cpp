@@ -161,10 +161,12 @@ class ConfigSolver {
     const double* y = y_.data();
     const double* x = xs.data();
     double* o = ys.data();
+    // The input's terms first and the latest output's last: the recursion's dependent chain
+    // (the last output to the next) is then one multiply and one subtract, not every term.
     for (std::size_t t = t0; t < N; ++t) {
       double v = c;
-      for (int i = 0; i < na; ++i) v -= a[i] * o[t - static_cast<std::size_t>(i + 1)];
       for (int k = 0; k < nb; ++k) v += b[k] * x[t - d0 - static_cast<std::size_t>(k)];
+      for (int i = na; i-- > 0;) v -= a[i] * o[t - static_cast<std::size_t>(i + 1)];
       o[t] = v;
       const double e = v - y[t];
       sse += e * e;

@@ -7,17 +7,15 @@
 #include <cmath>
 #include <cstring>
 
+#include "valvediag/core/simd.hpp"
+
 namespace valvediag::detail {
 
 namespace {
 
-// Two doubles in a vector register (GCC's vector extension): each lane's operations are the
-// IEEE ones of a scalar.
-using Pair = double __attribute__((vector_size(16)));
-
 Pair load_pair(const double* p) {
   Pair v;
-  std::memcpy(&v, p, sizeof v);
+  load(v, p);
   return v;
 }
 
@@ -25,31 +23,38 @@ Pair load_pair(const double* p) {
 // sums it with SSE2 (Redux.h, the linear vectorised traversal: two sums of pairs over the
 // quadruples, then the odd pair, the pair's halves and the odd sample), so that each is Eigen's
 // to the bit; in one pass they share l's loads and their chains of adds interleave (one dot's
-// chain left the core waiting).
-template <std::size_t K>
-void dots(const double* l, const std::array<const double*, 4>& r, std::size_t n, double* out) {
+// chain left the core waiting). A Quad (simd.hpp) holds the two pair sums side by side (lanes
+// 0-1 the pairs at i, 2-3 those at i + 2): with AVX one instruction per step, the same bits.
+template <class V, std::size_t K>
+[[gnu::always_inline]] inline void dots_body(const double* l, const std::array<const double*, 4>& r,
+                                             std::size_t n, double* out) {
   if (n < 2) {
     for (std::size_t k = 0; k < K; ++k) out[k] = n == 1 ? l[0] * r[k][0] : 0.0;
     return;
   }
   const std::size_t end2 = n / 4 * 4, end = n / 2 * 2;
-  std::array<Pair, K> s0, s1;
-  const Pair a0 = load_pair(l);
-  for (std::size_t k = 0; k < K; ++k) s0[k] = a0 * load_pair(r[k]);
-  if (end > 2) {
-    const Pair a1 = load_pair(l + 2);
-    for (std::size_t k = 0; k < K; ++k) s1[k] = a1 * load_pair(r[k] + 2);
+  std::array<Pair, K> s0;
+  if (end2 < 4) {  // two or three samples: one pair
+    const Pair a0 = load_pair(l);
+    for (std::size_t k = 0; k < K; ++k) s0[k] = a0 * load_pair(r[k]);
+  } else {
+    std::array<V, K> s;
+    V a, b;
+    load(a, l);
+    for (std::size_t k = 0; k < K; ++k) {
+      load(b, r[k]);
+      s[k] = a * b;
+    }
     for (std::size_t i = 4; i < end2; i += 4) {
-      const Pair a = load_pair(l + i), b = load_pair(l + i + 2);
+      load(a, l + i);
       for (std::size_t k = 0; k < K; ++k) {
-        s0[k] += a * load_pair(r[k] + i);
-        s1[k] += b * load_pair(r[k] + i + 2);
+        load(b, r[k] + i);
+        s[k] += a * b;
       }
     }
-    for (std::size_t k = 0; k < K; ++k) s0[k] += s1[k];
-    if (end > end2) {
-      const Pair a = load_pair(l + end2);
-      for (std::size_t k = 0; k < K; ++k) s0[k] += a * load_pair(r[k] + end2);
+    for (std::size_t k = 0; k < K; ++k) {
+      s0[k] = Pair{s[k][0], s[k][1]} + Pair{s[k][2], s[k][3]};
+      if (end > end2) s0[k] += load_pair(l + end2) * load_pair(r[k] + end2);
     }
   }
   for (std::size_t k = 0; k < K; ++k) {
@@ -57,6 +62,18 @@ void dots(const double* l, const std::array<const double*, 4>& r, std::size_t n,
     for (std::size_t i = end; i < n; ++i) res += l[i] * r[k][i];
     out[k] = res;
   }
+}
+
+template <std::size_t K>
+VALVEDIAG_AVX void dots_avx(const double* l, const std::array<const double*, 4>& r, std::size_t n,
+                            double* out) {
+  dots_body<Quad, K>(l, r, n, out);
+}
+
+template <std::size_t K>
+void dots_best(const double* l, const std::array<const double*, 4>& r, std::size_t n, double* out) {
+  if (kHaveAvx) return dots_avx<K>(l, r, n, out);
+  dots_body<Pairs, K>(l, r, n, out);
 }
 
 // dots() for any count: four at a time.
@@ -67,16 +84,16 @@ void dots(const double* l, const double* const* r, std::size_t count, std::size_
     for (std::size_t j = 0; j < m; ++j) q[j] = r[k + j];
     switch (m) {
       case 1:
-        dots<1>(l, q, n, out + k);
+        dots_best<1>(l, q, n, out + k);
         break;
       case 2:
-        dots<2>(l, q, n, out + k);
+        dots_best<2>(l, q, n, out + k);
         break;
       case 3:
-        dots<3>(l, q, n, out + k);
+        dots_best<3>(l, q, n, out + k);
         break;
       default:
-        dots<4>(l, q, n, out + k);
+        dots_best<4>(l, q, n, out + k);
     }
   }
 }

@@ -3,12 +3,17 @@
 #include <Eigen/Dense>
 #include <cmath>
 
+#include "valvediag/core/simd.hpp"
+
 namespace valvediag {
 
-PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
-                                     std::size_t nk, std::size_t order, std::size_t from,
-                                     std::size_t estimation_end, bool integrating,
-                                     bool differenced_input) {
+namespace {
+
+// arx_prediction_error's work, compiled twice (simd.hpp): its sums of products are each summed
+// in sample order, so the vectorised loops over a row's entries give the same bits with AVX.
+[[gnu::always_inline]] inline PredictionError prediction_error_body(
+    const std::vector<double>& y, const std::vector<double>& x, std::size_t nk, std::size_t order,
+    std::size_t from, std::size_t estimation_end, bool integrating, bool differenced_input) {
   PredictionError out;
   differenced_input = differenced_input && integrating;
   const std::size_t N = y.size();
@@ -71,6 +76,28 @@ PredictionError arx_prediction_error(const std::vector<double>& y, const std::ve
     out.validation_variance = mse(estimation_end, N, out.validation_samples);
   out.ok = std::isfinite(out.estimation_variance) && out.estimation_variance > 0;
   return out;
+}
+
+VALVEDIAG_AVX PredictionError prediction_error_avx(const std::vector<double>& y,
+                                                   const std::vector<double>& x, std::size_t nk,
+                                                   std::size_t order, std::size_t from,
+                                                   std::size_t estimation_end, bool integrating,
+                                                   bool differenced_input) {
+  return prediction_error_body(y, x, nk, order, from, estimation_end, integrating,
+                               differenced_input);
+}
+
+}  // namespace
+
+PredictionError arx_prediction_error(const std::vector<double>& y, const std::vector<double>& x,
+                                     std::size_t nk, std::size_t order, std::size_t from,
+                                     std::size_t estimation_end, bool integrating,
+                                     bool differenced_input) {
+  if (kHaveAvx)
+    return prediction_error_avx(y, x, nk, order, from, estimation_end, integrating,
+                                differenced_input);
+  return prediction_error_body(y, x, nk, order, from, estimation_end, integrating,
+                               differenced_input);
 }
 
 PredictionError best_arx_prediction_error(const std::vector<double>& y,

@@ -11,6 +11,7 @@
 
 #include "valvediag/core/hammerstein.hpp"
 #include "valvediag/core/parallel_for.hpp"
+#include "valvediag/core/simd.hpp"
 #include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
@@ -97,6 +98,18 @@ class Positioner {
   }
 
   Evaluated evaluate(const Candidate& c, bool keep = false) const {
+    if (kHaveAvx) return evaluate_avx(c, keep);
+    return evaluate_body<Pairs>(c, keep);
+  }
+
+ private:
+  VALVEDIAG_AVX Evaluated evaluate_avx(const Candidate& c, bool keep) const {
+    return evaluate_body<Quad>(c, keep);
+  }
+
+  // Compiled twice (simd.hpp): with AVX where the processor has it, the same bits either way.
+  template <class V>
+  [[gnu::always_inline]] inline Evaluated evaluate_body(const Candidate& c, bool keep) const {
     // Without `keep` only the estimation samples are read: the rest are not simulated.
     const std::size_t n = keep ? op_.size() : n_est_;
     std::vector<double> z(n);
@@ -113,43 +126,40 @@ class Positioner {
     Eigen::Vector4d b = Eigen::Vector4d::Zero();
     const std::size_t used = off_limits_.size();
     // The sums of p_i p_j (j <= i) and p_i mv over the samples, each in sample order: all of
-    // row i at once, two entries to an SSE2 register (GCC's vector extension, the scalar IEEE
-    // operations lane by lane), the sums in registers. The entries above the diagonal are
-    // summed too and dropped.
-    using Pair = double __attribute__((vector_size(16)));
-    std::array<Pair, 4> lo{}, hi{};  // row i: (A(i, 0), A(i, 1)), (A(i, 2), A(i, 3))
-    Pair b_lo{}, b_hi{};
+    // row i at once in one four-lane vector, the sums in registers. The entries above the
+    // diagonal are summed too and dropped.
+    std::array<V, 4> rows{};  // row i: A(i, 0 .. 3)
+    V bq{};
     for (const std::size_t k : off_limits_) {
-      const double p[4] = {1.0, z[k], z[k] * z[k], z[k] * z[k] * z[k]};
-      const Pair p01{p[0], p[1]}, p23{p[2], p[3]};
-      for (int i = 0; i < 4; ++i) {
-        lo[i] += p[i] * p01;
-        hi[i] += p[i] * p23;
-      }
-      b_lo += p01 * mv_[k];
-      b_hi += p23 * mv_[k];
+      V p;
+      set4(p, 1.0, z[k], z[k] * z[k], z[k] * z[k] * z[k]);
+      for (int i = 0; i < 4; ++i) rows[i] += p[i] * p;
+      bq += p * mv_[k];
     }
     for (int i = 0; i < m; ++i) {
-      b(i) = i < 2 ? b_lo[i] : b_hi[i - 2];
-      for (int j = 0; j <= i; ++j) A(i, j) = A(j, i) = j < 2 ? lo[i][j] : hi[i][j - 2];
+      b(i) = bq[i];
+      for (int j = 0; j <= i; ++j) A(i, j) = A(j, i) = rows[i][j];
     }
     Evaluated e;
     if (used < static_cast<std::size_t>(2 * m)) return e;
     // Minimum-norm solution: a valve model that never moves makes the powers collinear.
     const Eigen::VectorXd coef =
         A.topLeftCorner(m, m).completeOrthogonalDecomposition().solve(b.head(m));
+    double cf[4] = {};
+    for (int i = 0; i < m; ++i) cf[i] = coef(i);
     auto map = [&](double s) {
       double v = 0.0;
-      for (int i = m - 1; i >= 0; --i) v = v * s + coef(i);
+      for (int i = m - 1; i >= 0; --i) v = v * s + cf[i];
       return v;
     };
     e.gain = (map(1.0) - map(-1.0)) / (2.0 * half_);
     auto at = [&](std::size_t k) { return std::clamp(map(z[k]), lim_.lo, lim_.hi); };
-    e.sse = 0.0;
+    double sse = 0.0;  // a local: e's member would be stored on every sample
     for (std::size_t k = 0; k < n_est_; ++k) {
       const double r = mv_[k] - at(k);
-      e.sse += r * r;
+      sse += r * r;
     }
+    e.sse = sse;
     if (keep) {
       e.mv_hat.resize(n);
       for (std::size_t k = 0; k < n; ++k) e.mv_hat[k] = at(k);
@@ -157,7 +167,6 @@ class Positioner {
     return e;
   }
 
- private:
   const std::vector<double>& op_;
   const std::vector<double>& mv_;
   double Ts_;

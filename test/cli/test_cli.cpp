@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -348,6 +349,42 @@ TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladde
   auto none = run("ladder " + tmp("diag.csv") + " --history " + tmp("nothing-here.json"));
   CHECK(none.status == 2);
   CHECK(none.out.find("diagnose") != std::string::npos);
+}
+
+// The numeric kernels run with AVX where the processor has it and with SSE2 elsewhere
+// (core/simd.hpp); each lane does the same IEEE operations, so a whole diagnosis (ARX searches,
+// stiction fits, one-step predictions, the valve-travel calibration) gives the same numbers to
+// the last digit either way. Without AVX on this processor both runs take SSE2 and agree too.
+TEST_CASE("diagnose gives the same numbers with and without the AVX kernels" *
+          valvediag::test::release_only()) {
+  const std::string csv = tmp("avx.csv");
+  REQUIRE(run("simulate --scenario paper-ex1 --seed 3 --samples 3000 --out " + csv).status == 0);
+  const std::string args = "diagnose " + csv + " --auto --no-history --json ";
+  REQUIRE(run(args + tmp("avx-on.json")).status == 0);
+  ::setenv("VALVEDIAG_NO_AVX", "1", 1);  // the child inherits it
+  const int off = run(args + tmp("avx-off.json")).status;
+  ::unsetenv("VALVEDIAG_NO_AVX");
+  REQUIRE(off == 0);
+  std::ifstream a(tmp("avx-on.json")), b(tmp("avx-off.json"));
+  auto ja = nlohmann::json::parse(a), jb = nlohmann::json::parse(b);
+  // Wall times differ; every other number must not.
+  const auto strip = [](auto& self, nlohmann::json& j) -> void {
+    if (j.is_object()) {
+      for (auto it = j.begin(); it != j.end();)
+        if (it.key().find("elapsed") != std::string::npos ||
+            it.key().find("_utc") != std::string::npos)
+          it = j.erase(it);
+        else
+          self(self, *it++);
+    } else if (j.is_array()) {
+      for (auto& v : j) self(self, v);
+    }
+  };
+  strip(strip, ja);
+  strip(strip, jb);
+  REQUIRE(ja.contains("findings"));
+  CHECK(ja["valve_travel"]["tested"] == true);  // the calibration's kernel ran
+  CHECK(ja.dump() == jb.dump());
 }
 
 // Issue 5: a recorded valve position decides friction. On this second-order loop with a healthy
