@@ -227,6 +227,7 @@ nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, cons
          {"estimation_end", o.estimation_end},
          {"model_fitness_percent", num(o.judge.model_fitness_percent)},
          {"model_validation_fitness_percent", num(o.judge.model_validation_fitness_percent)},
+         {"true_model_gain_percent", num(o.true_model_gain)},
          {"climbed_model", o.climbed ? nlohmann::json(o.climbed_model) : nlohmann::json()},
          {"findings", findings}});
   }

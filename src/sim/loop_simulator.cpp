@@ -189,6 +189,8 @@ LoopSample LoopSimulator::step() {
     trace_.block_out[i].push_back(x);
   }
   trace_.load_pv.push_back(d_out + load_process_.output() - config_.process.pv0);
+  // The process is linear: its output less the input loads' response is the valve's alone.
+  trace_.valve_pv.push_back(y - trace_.load_pv.back());
   trace_.x.push_back(x);
   trace_.process_in.push_back(x + d_in);
   process_.advance(x + d_in);

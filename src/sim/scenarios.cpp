@@ -328,6 +328,7 @@ ScenarioRun run_scenario_traced(const Scenario& scenario, std::uint64_t seed, st
   ScenarioRun r;
   r.data = sim.run(samples, "scenario " + scenario.name + ", seed " + std::to_string(seed));
   r.activity = sim.activity();
+  r.valve_pv = sim.valve_pv();
   return r;
 }
 

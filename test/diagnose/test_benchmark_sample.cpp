@@ -84,9 +84,17 @@ TEST_CASE("benchmark sample: hidden effects named first, gains, and quiet contro
       ++hidden;
       first += o.named_first;
       gains += o.gains;
+      // The true model's gain is measured except against a hidden load (the true model would
+      // carry it) or a k-step judge (an integrating start model).
+      const bool load = std::count(o.loop.hidden.begin(), o.loop.hidden.end(), "disturbance") > 0;
+      CHECK(std::isfinite(o.true_model_gain) == (!load && o.judge.horizon == 0));
     }
   }
 #ifndef VALVEDIAG_SANITIZED
+  // Seed 15: a travel limit the linear start model cannot follow; the true model, driven by the
+  // recorded valve position, explains 41.8 points more of PV on both parts.
+  CHECK(out[15].loop.category == "saturation");
+  CHECK(out[15].true_model_gain > 20.0);
   CHECK(hidden == 22);
   CHECK(first >= kFirstFloor);
   CHECK(gains >= kGainFloor);

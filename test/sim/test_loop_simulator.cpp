@@ -142,6 +142,40 @@ TEST_CASE("Disturbances at the output and at the valve") {
   }
 }
 
+// The valve's own PV (the true model's output, the benchmark's reference): the process driven by
+// the valve position alone, without loads or measurement noise.
+TEST_CASE("valve_pv: PV as the valve alone moves it") {
+  LoopConfig c = open_loop();
+  c.controller.kc = 0.8;  // closed: the valve moves against the loads
+  c.setpoint = {{0.0, 20.0}, {40.0, 24.0}};
+  SUBCASE("without loads or noise it is PV") {
+    LoopSimulator sim(c, 3);
+    const LoopData d = sim.run(200);
+    REQUIRE(sim.valve_pv().size() == d.size());
+    for (std::size_t k = 0; k < d.size(); ++k) CHECK(sim.valve_pv()[k] == doctest::Approx(d.pv[k]));
+  }
+  SUBCASE("loads and noise are left out, the valve's moves kept") {
+    c.disturbances.steps = {{60.0, 2.0, DisturbanceEntry::input},
+                            {90.0, -1.0, DisturbanceEntry::output}};
+    c.disturbances.noises = {{0.3, 8.0, DisturbanceEntry::input}};
+    c.measurement_noise_std = 0.2;
+    LoopSimulator sim(c, 4);
+    const LoopData d = sim.run(200);
+    REQUIRE(sim.valve_pv().size() == d.size());
+    // The same process driven by the recorded valve position from its rest there.
+    DiscreteProcess p(c.process, c.Ts);
+    p.reset(c.controller.op0);
+    double worst = 0.0, load = 0.0;
+    for (std::size_t k = 0; k < d.size(); ++k) {
+      worst = std::max(worst, std::abs(sim.valve_pv()[k] - p.output()));
+      load = std::max(load, std::abs(d.pv[k] - sim.valve_pv()[k]));
+      p.advance(d.mv[k]);
+    }
+    CHECK(worst < 1e-9);
+    CHECK(load > 1.0);  // PV does carry the loads
+  }
+}
+
 TEST_CASE("Seeded runs are reproducible, different seeds differ") {
   LoopConfig c = open_loop();
   c.controller.kc = 0.5;

@@ -35,7 +35,14 @@ struct BenchmarkOutcome {
   // The hidden effect's trial against the start model: the gain the diagnosis scores (the smaller
   // of the held-out and estimation gains) and the gain on the held-out part, in points.
   double true_gain = 0.0, true_validation_gain = 0.0;
-  bool gains = false;                  // true_gain >= 2 points (the target)
+  bool gains = false;  // true_gain >= 2 points (the target)
+  // What the true model gains over the fitted start model, in points, on the same parts and as
+  // the gains are scored (the smaller of the two parts): the true process driven by the true
+  // valve position, without loads or measurement noise (LoopSimulator::valve_pv). Below 2 the
+  // issue's target is out of reach of the right model itself: the effect changes PV less than
+  // the loads and the noise leave. NaN where not measured: a hidden load (the true model would
+  // carry it) or a k-step judge (an integrating start model, whose simulation drifts).
+  double true_model_gain = std::numeric_limits<double>::quiet_NaN();
   bool false_alarm = false;            // a control with a supported finding
   std::string false_effect;            // what it found
   std::vector<ParameterError> errors;  // the hidden effects' fitted parameters against the truth

@@ -136,6 +136,10 @@ class LoopSimulator {
   // valve block (in chain order) and per process effect present (delay, order, integrator,
   // disturbance). `move`: a valve move or lag worth noting, % (default 0.5).
   std::vector<EffectActivity> activity(double move = 0.5) const;
+  // PV as the valve alone moves it since the last reset, one value per sample: the process
+  // driven by the valve position from rest, without the loads and the measurement noise (the
+  // true model's output, to measure what any model of the valve and process could explain).
+  const std::vector<double>& valve_pv() const { return trace_.valve_pv; }
 
  private:
   double setpoint_at(double t) const;
@@ -154,7 +158,7 @@ class LoopSimulator {
   // What activity() needs, one entry per sample since the last reset.
   struct Trace {
     std::vector<std::vector<double>> block_in, block_out;  // per valve block
-    std::vector<double> x, process_in, load_pv;
+    std::vector<double> x, process_in, load_pv, valve_pv;
   };
   Trace trace_;
   DiscreteProcess load_process_;  // the process driven by the input loads only (from rest)

@@ -33,6 +33,7 @@ LoopData run_scenario(const Scenario& scenario, std::uint64_t seed, std::size_t 
 struct ScenarioRun {
   LoopData data;
   std::vector<EffectActivity> activity;
+  std::vector<double> valve_pv;  // LoopSimulator::valve_pv: PV without loads and noise
   const EffectActivity* find(const std::string& effect) const;  // nullptr when absent
 };
 ScenarioRun run_scenario_traced(const Scenario& scenario, std::uint64_t seed, std::size_t samples);
