@@ -23,8 +23,8 @@ Pair load_pair(const double* p) {
 // sums it with SSE2 (Redux.h, the linear vectorised traversal: two sums of pairs over the
 // quadruples, then the odd pair, the pair's halves and the odd sample), so that each is Eigen's
 // to the bit; in one pass they share l's loads and their chains of adds interleave (one dot's
-// chain left the core waiting). A Quad (simd.hpp) holds the two pair sums side by side (lanes
-// 0-1 the pairs at i, 2-3 those at i + 2): with AVX one instruction per step, the same bits.
+// chain left the core waiting). A four-lane V (simd.hpp) holds the two pair sums side by side
+// (lanes 0-1 the pairs at i, 2-3 those at i + 2): with AVX one instruction per step, same bits.
 template <class V, std::size_t K>
 [[gnu::always_inline]] inline void dots_body(const double* l, const std::array<const double*, 4>& r,
                                              std::size_t n, double* out) {

@@ -142,11 +142,12 @@ void simulated_sse4_loop(const std::array<SseWindow, 4>& w, double bound, double
 
 // The same for orders NA, NB known at compile time (the loop above serves the others), with
 // each lane's load made from its knots as window() fills it, expression for expression, instead
-// of read from a buffer filled per lane. The four lanes are one Quad (simd.hpp): coefficients and
-// past outputs stay in registers (storing each output and loading it back on the next sample put
-// a store-to-load forwarding delay on the recursion's dependent chain, and testing each lane for
-// a load cost a branch per sample). Same operations in the same order: the sums are the loop's,
-// to the bit. Every lane has knots or none (one estimator's fits do).
+// of read from a buffer filled per lane. The four lanes are one vector V (simd.hpp: Quad with
+// AVX, Pairs without): coefficients and past outputs stay in registers (storing each output and
+// loading it back on the next sample put a store-to-load forwarding delay on the recursion's
+// dependent chain, and testing each lane for a load cost a branch per sample). Same operations in
+// the same order: the sums are the loop's, to the bit. Every lane has knots or none (one
+// estimator's fits do).
 template <class V, std::size_t NA, std::size_t NB, bool Integrating>
 [[gnu::always_inline]] inline void simulated_sse4_body(const std::array<SseWindow, 4>& w,
                                                        double bound, double* out) {
@@ -230,9 +231,9 @@ void simulated_sse4(const std::array<SseWindow, 4>& w, double bound, double* out
   simulated_sse4_body<Pairs, NA, NB, Integrating>(w, bound, out);
 }
 
-// dot() of p with each of q in one pass: the same sums (a Quad holds each dot's four partial
-// sums, the scalar operations lane by lane; simd.hpp), their chains of adds interleaved and p's
-// loads shared.
+// dot() of p with each of q in one pass: the same sums (a four-lane V holds each dot's four
+// partial sums, the scalar operations lane by lane; simd.hpp), their chains of adds interleaved and
+// p's loads shared.
 template <class V, std::size_t K>
 [[gnu::always_inline]] inline void dots_body(const double* p, const std::array<const double*, K>& q,
                                              std::size_t n, double* out) {
