@@ -470,6 +470,7 @@ SimPlc::SimPlc(SiteConfig site, SimPlcOptions options) : impl_(std::make_unique<
     }
     ServedLoop sl{&l, b, can, std::make_unique<LoopSimulator>(s.loop, l.seed),
                   s.loop.Ts / options.speed};
+    sl.sim->keep_trace(false);  // it steps for as long as the PLC runs
     if (can && std::none_of(m.can_eps.begin(), m.can_eps.end(),
                             [b](const CanEndpoint& e) { return e.bus == b; }))
       m.can_eps.push_back({b, can_unix_path(*b), -1, {}});

@@ -184,15 +184,17 @@ LoopSample LoopSimulator::step() {
   const double u = pi_.step(sp, ym);
   double x = u;
   for (std::size_t i = 0; i < valve_.effects().size(); ++i) {
-    trace_.block_in[i].push_back(x);
+    if (keep_trace_) trace_.block_in[i].push_back(x);
     x = std::visit([x](auto& block) { return block.step(x); }, valve_.effects()[i]);
-    trace_.block_out[i].push_back(x);
+    if (keep_trace_) trace_.block_out[i].push_back(x);
   }
-  trace_.load_pv.push_back(d_out + load_process_.output() - config_.process.pv0);
-  // The process is linear: its output less the input loads' response is the valve's alone.
-  trace_.valve_pv.push_back(y - trace_.load_pv.back());
-  trace_.x.push_back(x);
-  trace_.process_in.push_back(x + d_in);
+  if (keep_trace_) {
+    trace_.load_pv.push_back(d_out + load_process_.output() - config_.process.pv0);
+    // The process is linear: its output less the input loads' response is the valve's alone.
+    trace_.valve_pv.push_back(y - trace_.load_pv.back());
+    trace_.x.push_back(x);
+    trace_.process_in.push_back(x + d_in);
+  }
   process_.advance(x + d_in);
   load_process_.advance(d_in);
 

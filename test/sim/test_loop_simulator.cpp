@@ -174,6 +174,15 @@ TEST_CASE("valve_pv: PV as the valve alone moves it") {
     CHECK(worst < 1e-9);
     CHECK(load > 1.0);  // PV does carry the loads
   }
+  SUBCASE("without the trace nothing grows, and the samples are the same") {
+    LoopSimulator traced(c, 5), bare(c, 5);
+    bare.keep_trace(false);
+    const LoopData a = traced.run(300), b = bare.run(300);
+    CHECK(a.pv == b.pv);
+    CHECK(a.op == b.op);
+    CHECK(traced.valve_pv().size() == 300);
+    CHECK(bare.valve_pv().empty());
+  }
 }
 
 TEST_CASE("Seeded runs are reproducible, different seeds differ") {

@@ -128,6 +128,10 @@ class LoopSimulator {
  public:
   LoopSimulator(LoopConfig config, std::uint64_t seed);  // validates; starts at rest
   void reset(std::uint64_t seed);                        // back to t = 0 with a new seed
+  // Whether step() keeps the per-sample trace that activity() and valve_pv() read (default on).
+  // A simulator stepped without end (the simulated PLC) turns it off: it would grow by a few
+  // values per sample for as long as it runs.
+  void keep_trace(bool on) { keep_trace_ = on; }
   LoopSample step();
   // The next `samples` samples as LoopData (sp and mv filled); `source` names the run.
   LoopData run(std::size_t samples, const std::string& source = "simulation");
@@ -161,6 +165,7 @@ class LoopSimulator {
     std::vector<double> x, process_in, load_pv, valve_pv;
   };
   Trace trace_;
+  bool keep_trace_ = true;
   DiscreteProcess load_process_;  // the process driven by the input loads only (from rest)
   double x_rest_ = 0.0;
 };
