@@ -228,6 +228,7 @@ nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, cons
          {"model_fitness_percent", num(o.judge.model_fitness_percent)},
          {"model_validation_fitness_percent", num(o.judge.model_validation_fitness_percent)},
          {"true_model_gain_percent", num(o.true_model_gain)},
+         {"valve_search_shortfall_points", num(o.valve_search_shortfall)},
          {"climbed_model", o.climbed ? nlohmann::json(o.climbed_model) : nlohmann::json()},
          {"findings", findings}});
   }

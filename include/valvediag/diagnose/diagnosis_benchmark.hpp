@@ -43,6 +43,14 @@ struct BenchmarkOutcome {
   // the loads and the noise leave. NaN where not measured: a hidden load (the true model would
   // carry it) or a k-step judge (an integrating start model, whose simulation drifts).
   double true_model_gain = std::numeric_limits<double>::quiet_NaN();
+  // The hidden valve effect's search measured against the true valve position: the trial's
+  // process part (its spec without the valve effects) fitted with the simulator's valve position
+  // as input, its estimation fitness less the trial's, in points. Above 0 the search stopped
+  // short of a valve that fits the estimation part better (or the true valve lies outside the
+  // trial's class): a miss there is the search's. At or below 0 the search found as good a
+  // valve by its own criterion, and a miss is the criterion's or the closed loop's. NaN where
+  // not measured: a process effect, two hidden effects, a k-step judge.
+  double valve_search_shortfall = std::numeric_limits<double>::quiet_NaN();
   bool false_alarm = false;            // a control with a supported finding
   std::string false_effect;            // what it found
   std::vector<ParameterError> errors;  // the hidden effects' fitted parameters against the truth
