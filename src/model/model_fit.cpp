@@ -870,21 +870,26 @@ nlopt_result polish_all(Search& s, const ModelFitOptions& opt, const std::vector
   return r;
 }
 
-// The valve coordinates' search: one effect alone by search_space; an actuator lag beside one
-// valve nonlinearity by a profile of the lag; other composed chains each effect first on its own
-// (the others at rest), then a joint polish of all coordinates from there (a joint grid is too
-// coarse in 4 or more dimensions). The best point is left in s.best_z.
+// The valve coordinates' search: one effect alone by search_space; a lag (actuator-lag or order)
+// beside one valve nonlinearity by a profile of the lag; other composed chains each effect first on
+// its own (the others at rest), then a joint polish of all coordinates from there (a joint grid is
+// too coarse in 4 or more dimensions). The best point is left in s.best_z.
 nlopt_result search_valve(Search& s, const ModelFitOptions& opt,
                           const std::vector<double>* start = nullptr) {
-  if (s.effects.size() == 2 &&
-      (s.effects[0].name == "actuator-lag") != (s.effects[1].name == "actuator-lag")) {
-    // An actuator lag and one valve nonlinearity: searched effect by effect, the lag fitted with
-    // the nonlinearity at rest takes up its delay, and the nonlinearity fitted behind that lag
-    // keeps it there (measured, development seed 89: a lag of 18.2 s for the true 7.5 s, the
-    // true valve position fitting the estimation part 5.5 points better). The lag is profiled:
-    // the nonlinearity searched on a coarser grid at each of its time constants, the best point
-    // polished in all coordinates.
-    const std::size_t lag = s.effects[0].name == "actuator-lag" ? 0 : 1;
+  // A first-order lag block: the actuator's before the valve effects, or `order`'s after them.
+  const auto is_lag = [&s](std::size_t k) {
+    return s.effects[k].name == "actuator-lag" || s.effects[k].name == "order";
+  };
+  if (s.effects.size() == 2 && is_lag(0) != is_lag(1)) {
+    // A lag (an actuator's or an extra process lag) and one valve nonlinearity: searched effect
+    // by effect, the lag fitted with the nonlinearity at rest takes up its delay, and the
+    // nonlinearity fitted beside that lag keeps it there (measured, development seed 89: an
+    // actuator lag of 18.2 s for the true 7.5 s, the true valve position fitting the estimation
+    // part 5.5 points better). The lag is profiled: the nonlinearity searched on a coarser grid
+    // at each of its time constants, the best point polished in all coordinates. Both lags alike:
+    // `order` competes with `actuator-lag` beside a sticky valve, and the ranking should compare
+    // the two placements, not two searches.
+    const std::size_t lag = is_lag(0) ? 0 : 1;
     const std::size_t other = 1 - lag;
     ModelFitOptions coarse = opt;
     if (coarse.grid_points == 0) coarse.grid_points = 11;
