@@ -278,8 +278,7 @@ bool lr_refutes(const std::vector<double>& y, const std::vector<double>& narrow_
 // An effect on the path from OP to PV: the valve's, a dead time or an extra process lag (the
 // one-step prediction from the valve position judges these; prediction_error.hpp).
 bool on_input_path(const std::string& e) {
-  const EffectInfo* info = find_effect(e);
-  return (info && info->stage == EffectStage::Valve) || e == "delay" || e == "order";
+  return is_valve_effect(e) || e == "delay" || e == "order";
 }
 
 // The effects the one-step prediction of PV can judge: those on the path from OP to PV (their

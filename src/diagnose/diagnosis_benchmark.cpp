@@ -128,15 +128,15 @@ BenchmarkOutcome run_benchmark_case(const RandomLoop& loop, DiagnoseOptions opt,
         o.true_model_gain =
             std::min(fitness_percent(d.pv, run.valve_pv, m.first_sample, e0) - m.fitness_percent,
                      fitness_percent(d.pv, run.valve_pv, e0, N) - m.validation_fitness_percent);
-      const EffectInfo* hi = hidden.size() == 1 ? find_effect(hidden.front()) : nullptr;
-      const auto tf = std::find_if(f.begin(), f.end(),
-                                   [&](const Finding& x) { return hi && x.effect == hi->name; });
-      if (o.judge.horizon == 0 && hi && hi->stage == EffectStage::Valve && d.mv.size() == N &&
-          tf != f.end() && std::isfinite(tf->trial_fitness_percent)) {
+      const bool one_valve = hidden.size() == 1 && is_valve_effect(hidden.front());
+      const auto tf = std::find_if(f.begin(), f.end(), [&](const Finding& x) {
+        return one_valve && x.effect == hidden.front();
+      });
+      if (o.judge.horizon == 0 && one_valve && d.mv.size() == N && tf != f.end() &&
+          std::isfinite(tf->trial_fitness_percent)) {
+        // The trial's process part: its chain less the valve effects (still canonical).
         ModelSpec process = tf->trial_spec;
-        for (const auto& e : tf->trial_spec.effects)
-          if (const EffectInfo* i = find_effect(e.name); i && i->stage == EffectStage::Valve)
-            process = remove_effect(process, e.name);
+        std::erase_if(process.effects, [](const EffectSpec& e) { return is_valve_effect(e.name); });
         const ModelFit on_x = fit_model(d.mv, d.pv, d.sample_period(), process, fit_options(opt));
         if (std::isfinite(on_x.fitness_percent))
           o.valve_search_shortfall = on_x.fitness_percent - tf->trial_fitness_percent;

@@ -64,8 +64,7 @@ double nlopt_cost(unsigned n, const double* za, double* grad, void* data) {
 }  // namespace
 
 bool refitted_to_prediction(const std::string& effect) {
-  const EffectInfo* info = find_effect(effect);
-  return effect != "preisach" && ((info && info->stage == EffectStage::Valve) || effect == "order");
+  return effect != "preisach" && (is_valve_effect(effect) || effect == "order");
 }
 
 PredictionRefit refit_by_prediction(const std::vector<double>& u, const std::vector<double>& y,

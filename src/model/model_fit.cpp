@@ -839,8 +839,8 @@ nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt)
   return stage(std::move(active), opt);
 }
 
-// Time constants (shares of the lag's range) at which an actuator lag is profiled: denser where
-// the lag is short beside the range (60 samples), as most are.
+// Time constants (shares of the lag's range) at which a lag beside a valve nonlinearity is
+// profiled: denser where the lag is short beside the range (60 samples), as most are.
 constexpr std::array<double, 12> kLagProfile = {0.0, 0.02, 0.04, 0.07, 0.1,  0.14,
                                                 0.2, 0.28, 0.4,  0.55, 0.75, 1.0};
 
@@ -876,10 +876,7 @@ nlopt_result polish_all(Search& s, const ModelFitOptions& opt, const std::vector
 // too coarse in 4 or more dimensions). The best point is left in s.best_z.
 nlopt_result search_valve(Search& s, const ModelFitOptions& opt,
                           const std::vector<double>* start = nullptr) {
-  // A first-order lag block: the actuator's before the valve effects, or `order`'s after them.
-  const auto is_lag = [&s](std::size_t k) {
-    return s.effects[k].name == "actuator-lag" || s.effects[k].name == "order";
-  };
+  const auto is_lag = [&s](std::size_t k) { return is_lag_effect(s.effects[k].name); };
   if (s.effects.size() == 2 && is_lag(0) != is_lag(1)) {
     // A lag (an actuator's or an extra process lag) and one valve nonlinearity: searched effect
     // by effect, the lag fitted with the nonlinearity at rest takes up its delay, and the
@@ -897,10 +894,11 @@ nlopt_result search_valve(Search& s, const ModelFitOptions& opt,
     const double from = s.span_lo, width = s.span_hi - s.span_lo;
     const double parts = static_cast<double>(kLagProfile.size() + 2);
     const auto part = [&](double k) { return from + width * k / parts; };
+    const std::vector<double> rest = neutral_point(s);
     for (std::size_t i = 0; i < kLagProfile.size(); ++i) {
       s.span_lo = part(static_cast<double>(i));
       s.span_hi = part(static_cast<double>(i + 1));
-      s.base = neutral_point(s);
+      s.base = rest;
       s.base[s.offset[lag]] = kLagProfile[i];
       search_effect(s, other, coarse);
     }

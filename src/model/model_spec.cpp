@@ -95,6 +95,15 @@ const EffectInfo* find_effect(std::string_view name) {
   return nullptr;
 }
 
+bool is_valve_effect(std::string_view name) {
+  const EffectInfo* info = find_effect(name);
+  return info && info->stage == EffectStage::Valve;
+}
+
+bool is_lag_effect(std::string_view name) {
+  return name == "actuator-lag" || name == "order";
+}
+
 bool is_memory_effect(std::string_view name) {
   return name == "stiction" || name == "deadband" || name == "preisach";
 }
@@ -106,8 +115,7 @@ bool has_memory_effect(const ModelSpec& spec) {
 
 bool has_valve_nonlinearity(const ModelSpec& spec) {
   return std::any_of(spec.effects.begin(), spec.effects.end(), [](const EffectSpec& e) {
-    const EffectInfo* info = find_effect(e.name);
-    return info && info->stage == EffectStage::Valve && e.name != "actuator-lag";
+    return is_valve_effect(e.name) && e.name != "actuator-lag";
   });
 }
 

@@ -92,7 +92,7 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
     if (fixed) kind = characteristic_kind_from_string(e.variant);
     return Characteristic(kind, std::exp(std::max(std::abs(k), kLinearCurvature)));
   }
-  if (e.name == "actuator-lag" || e.name == "order") return ActuatorLag(std::max(th[0], 0.0), r.Ts);
+  if (is_lag_effect(e.name)) return ActuatorLag(std::max(th[0], 0.0), r.Ts);
   if (e.name == "preisach" && e.variant == "position-dependent") {
     const double fs = std::max(th[0], 0.0), c = std::clamp(th[1], -1.0, 1.0);
     const double ratio = std::clamp(th[2], 0.0, 1.0);

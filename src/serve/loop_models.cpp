@@ -377,10 +377,8 @@ json simulation_json(const ModelStep& s, const LoopData& d, double from, double 
 }
 
 bool has_valve_effect(const ModelSpec& spec) {
-  return std::any_of(spec.effects.begin(), spec.effects.end(), [](const EffectSpec& e) {
-    const EffectInfo* info = find_effect(e.name);
-    return info && info->stage == EffectStage::Valve;
-  });
+  return std::any_of(spec.effects.begin(), spec.effects.end(),
+                     [](const EffectSpec& e) { return is_valve_effect(e.name); });
 }
 
 json signature_json(const ModelStep& s, const LoopData& d, double from, double to, int points) {

@@ -90,9 +90,8 @@ TEST_CASE("benchmark sample: hidden effects named first, gains, and quiet contro
       CHECK(std::isfinite(o.true_model_gain) == (!load && o.judge.horizon == 0));
       // The valve search is measured against the true valve position for one hidden valve
       // effect under the simulated-output judge.
-      const EffectInfo* e = find_effect(o.loop.hidden.front());
       CHECK(std::isfinite(o.valve_search_shortfall) ==
-            (o.loop.hidden.size() == 1 && e && e->stage == EffectStage::Valve &&
+            (o.loop.hidden.size() == 1 && is_valve_effect(o.loop.hidden.front()) &&
              o.judge.horizon == 0));
     }
   }

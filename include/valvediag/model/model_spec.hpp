@@ -53,6 +53,12 @@ struct ModelSpec {
   bool operator==(const ModelSpec&) const = default;
 };
 
+// An effect of the valve stage (actuator-lag, stiction, deadband, preisach, saturation,
+// characteristic: what the valve position x carries); false for process effects and unknown names.
+bool is_valve_effect(std::string_view name);
+// actuator-lag or order: a first-order lag block (ActuatorLag), before the valve effects or after
+// them.
+bool is_lag_effect(std::string_view name);
 // Valve effects with memory (stiction, deadband, preisach): the valve's position depends on the
 // path OP took, not on its present value alone.
 bool is_memory_effect(std::string_view name);
