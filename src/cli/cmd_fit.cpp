@@ -38,6 +38,9 @@ struct FitArgs {
   std::vector<std::string> add, remove;
   HistoryOptions hist;   // --history, --no-history
   bool verdict = false;  // --verdict: the loop's one verdict too (loop_verdict.hpp)
+  // Given on the command line: the ARX orders and Preisach levels bound a --model fit too; the
+  // options of the Preisach identification alone are refused with --model.
+  std::vector<CLI::Option*> orders, levels, identification_only;
 };
 
 // "0.3": the last 30 % held out; "t=600" or "600s": samples from t >= 600 s held out;
@@ -91,6 +94,47 @@ std::size_t validation_start(LoopData& d, const std::string& spec, FitOptions& f
 
 }  // namespace
 
+// The orders, levels and threads given on the command line steer the model's search as they do the
+// Preisach identification; the model's own (smaller) defaults stay where none was given.
+void apply_given_options(const FitArgs& a, const FitOptions& fo, ModelFitOptions& mo) {
+  for (const CLI::Option* o : a.identification_only)
+    if (o->count() > 0)
+      throw UsageError(o->get_name() +
+                       " goes with the Preisach identification (fit without --model, --add or "
+                       "--remove): leave it out");
+  const auto given = [&a](const std::string& name) {
+    for (const CLI::Option* o : a.orders)
+      if (o->check_name(name)) return o->count() > 0;
+    for (const CLI::Option* o : a.levels)
+      if (o->check_name(name)) return o->count() > 0;
+    return false;
+  };
+  StructureRange& r = mo.structure;
+  if (given("--na-min")) r.na_min = fo.na_min;
+  if (given("--na-max")) r.na_max = fo.na_max;
+  if (given("--nb-min")) r.nb_min = fo.nb_min;
+  if (given("--nb-max")) r.nb_max = fo.nb_max;
+  if (given("--nk-min")) r.nk_min = fo.nk_min;
+  if (given("--nk-max")) r.nk_max = fo.nk_max;
+  if (given("--L-min")) mo.preisach_L_min = fo.L_min;
+  if (given("--L-max")) mo.preisach_L_max = fo.L_max;
+  mo.threads = fo.threads;
+  if (r.na_min < 1 || r.nb_min < 1 || r.nk_min < 0 || r.na_min > r.na_max || r.nb_min > r.nb_max ||
+      r.nk_min > r.nk_max)
+    throw UsageError(
+        "the ARX orders must satisfy 1 <= na-min <= na-max, 1 <= nb-min <= nb-max "
+        "and 0 <= nk-min <= nk-max (with --model the defaults are na, nb 1..2 and "
+        "nk 0..10): got na " +
+        std::to_string(r.na_min) + ".." + std::to_string(r.na_max) + ", nb " +
+        std::to_string(r.nb_min) + ".." + std::to_string(r.nb_max) + ", nk " +
+        std::to_string(r.nk_min) + ".." + std::to_string(r.nk_max));
+  if (mo.preisach_L_min < 1 || mo.preisach_L_min > mo.preisach_L_max)
+    throw UsageError("the Preisach levels must satisfy 1 <= L-min <= L-max: got " +
+                     std::to_string(mo.preisach_L_min) + ".." + std::to_string(mo.preisach_L_max));
+  // `order` searches na, nb up to order_max: never below the base range.
+  mo.order_max = std::max({mo.order_max, r.na_max, r.nb_max});
+}
+
 // fit --model/--add/--remove: a composable model, relative to the data's model history.
 int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const HistoryPlace& history,
              const LoopVerdict* lv) {
@@ -132,6 +176,7 @@ int fit_spec(const LoopData& d, const FitArgs& a, const FitOptions& fo, const Hi
   ModelFitOptions mo;
   mo.validation_fraction = fo.validation_fraction;
   mo.validation_start = fo.validation_start;
+  apply_given_options(a, fo, mo);
   // Effects only added to the last model: that model, fitted again as it was, starts the new
   // one's search and bounds it (ModelFitOptions::extends), so adding an effect never fits the
   // estimation part worse than the model it was added to. Not the Preisach weights: their
@@ -216,20 +261,25 @@ void add_fit(CLI::App& app, int& exit_code) {
   add_op_range_option(cmd, a->op_range);
 
   auto* g_m = "Model";
-  cmd->add_option("--na-max", a->fit.na_max, "largest A order")->group(g_m)->capture_default_str();
-  cmd->add_option("--nb-max", a->fit.nb_max, "largest B order")->group(g_m)->capture_default_str();
-  cmd->add_option("--nk-max", a->fit.nk_max, "largest delay in samples")
-      ->group(g_m)
-      ->capture_default_str();
-  cmd->add_option("--L-max", a->fit.L_max, "largest Preisach discretization level")
-      ->group(g_m)
-      ->capture_default_str();
-  cmd->add_option("--na-min", a->fit.na_min, "smallest A order")->group(g_m);
-  cmd->add_option("--nb-min", a->fit.nb_min, "smallest B order")->group(g_m);
-  cmd->add_option("--nk-min", a->fit.nk_min, "smallest delay")->group(g_m);
-  cmd->add_option("--L-min", a->fit.L_min, "smallest Preisach level")
-      ->group(g_m)
-      ->capture_default_str();
+  a->orders = {cmd->add_option("--na-max", a->fit.na_max, "largest A order (--model: default 2)")
+                   ->group(g_m)
+                   ->capture_default_str(),
+               cmd->add_option("--nb-max", a->fit.nb_max, "largest B order (--model: default 2)")
+                   ->group(g_m)
+                   ->capture_default_str(),
+               cmd->add_option("--nk-max", a->fit.nk_max, "largest delay in samples")
+                   ->group(g_m)
+                   ->capture_default_str(),
+               cmd->add_option("--na-min", a->fit.na_min, "smallest A order")->group(g_m),
+               cmd->add_option("--nb-min", a->fit.nb_min, "smallest B order")->group(g_m),
+               cmd->add_option("--nk-min", a->fit.nk_min, "smallest delay")->group(g_m)};
+  a->levels = {cmd->add_option("--L-max", a->fit.L_max,
+                               "largest Preisach discretization level (--model: default 16)")
+                   ->group(g_m)
+                   ->capture_default_str(),
+               cmd->add_option("--L-min", a->fit.L_min, "smallest Preisach level")
+                   ->group(g_m)
+                   ->capture_default_str()};
   cmd->add_option("--output", a->output,
                   "fit pv (process) or mv (measured valve position, identity block)")
       ->check(CLI::IsMember({"pv", "mv"}))
@@ -270,6 +320,9 @@ void add_fit(CLI::App& app, int& exit_code) {
       ->group(g_m)
       ->capture_default_str();
   cmd->add_option("--threads", a->fit.threads, "worker threads (0: all cores)")->group(g_m);
+  for (const char* name : {"--method", "--stop", "--normalization", "--initial-memory",
+                           "--bic-simulated", "--no-merge", "--max-iterations", "--parsimony"})
+    a->identification_only.push_back(cmd->get_option(name));
 
   auto* g_v = "Validation and output";
   cmd->add_option(
@@ -281,6 +334,7 @@ void add_fit(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"estimation", "validation"}))
       ->group(g_v)
       ->capture_default_str();
+  a->identification_only.push_back(cmd->get_option("--select-on"));
   cmd->add_option("--json", a->json, "write the result as JSON")->group(g_v);
   const char* g_e = "Composable models (effects.md)";
   cmd->add_option("--model", a->model,

@@ -546,6 +546,31 @@ TEST_CASE("fit --model / --add / --remove climb the ladder of the same data") {
   CHECK(run("fit " + tmp("db.csv") + hist + " --add wobble").status == 2);
 }
 
+// The ARX orders bound a --model fit as they bound the Preisach identification; the options
+// of that identification alone are refused there rather than silently ignored.
+TEST_CASE("fit --model takes the orders given and refuses the identification's own options") {
+  write(tmp("orders.csv"), loop_csv(1200));
+  const std::string base = "fit " + tmp("orders.csv") + " --no-history --model linear";
+  auto dflt = run(base);
+  REQUIRE(dflt.status == 0);
+  auto two = run(base + " --na-min 2 --nb-min 2");
+  REQUIRE(two.status == 0);
+  CHECK(two.out.find("(na 2, nb 2,") != std::string::npos);
+  auto three = run(base + " --na-min 3 --na-max 3 --nk-max 3");
+  REQUIRE(three.status == 0);
+  CHECK(three.out.find("(na 3, nb ") != std::string::npos);
+  for (const char* opt : {"--method alternation", "--parsimony 1", "--no-merge",
+                          "--select-on validation --validate 0.3", "--initial-memory rising"}) {
+    CAPTURE(opt);
+    auto r = run(base + " " + opt);
+    CHECK(r.status == 2);
+    CHECK(r.out.find("goes with the Preisach identification") != std::string::npos);
+  }
+  auto bad = run(base + " --nk-min 5 --nk-max 3");
+  CHECK(bad.status == 2);
+  CHECK(bad.out.find("nk") != std::string::npos);
+}
+
 TEST_CASE("fit --add never fits the estimation part worse than the model it adds to") {
   // Paper Example 1: an actuator lag added to He's friction was searched from scratch, effect by
   // effect on coarser grids, and fitted 94.3 % where the friction alone fitted 98.6 %: adding an
