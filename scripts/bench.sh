@@ -17,7 +17,8 @@ cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)" --target valvediag_bench valvediag_load_bench \
-  valvediag_structure_bench valvediag_quantification_bench valvediag >/dev/null
+  valvediag_structure_bench valvediag_quantification_bench valvediag_prediction_bench \
+  valvediag >/dev/null
 build/bench/valvediag_bench "$@"
 echo
 echo "== recorder load"
@@ -26,6 +27,10 @@ build/bench/valvediag_load_bench "${LOAD_SECONDS:-60}"
 echo
 echo "== structure search"
 build/bench/valvediag_structure_bench "${SEARCH_REPS:-5}"
+
+echo
+echo "== one-step prediction error (the prediction refit's evaluations)"
+build/bench/valvediag_prediction_bench "${SEARCH_REPS:-5}"
 
 echo
 cores=$(nproc)

@@ -192,3 +192,33 @@ TEST_CASE(
     CHECK(pe_mv < 0.985 * pe_op);
   }
 }
+
+// The searches' fast form sums PV's columns once and x's by sliding lagged sums: the same
+// variance as the direct normal equations, for every dead time, order and form it serves.
+TEST_CASE("PredictionErrorSearch gives arx_prediction_error's estimation variance") {
+  const ArxData d = arx_data(1500, 7);
+  std::vector<double> level(d.y.size());  // an integrating PV: the sum of d.y
+  double s = 40.0;
+  for (std::size_t t = 0; t < d.y.size(); ++t) level[t] = s += 0.05 * d.y[t];
+  for (bool integrating : {false, true}) {
+    const std::vector<double>& y = integrating ? level : d.y;
+    for (std::size_t order : {1u, 3u, 12u}) {
+      const std::size_t from = 40, end = 1000;
+      PredictionErrorSearch search(y, order, from, end, integrating);
+      for (std::size_t nk : {0u, 2u, 9u, 20u}) {
+        CAPTURE(integrating);
+        CAPTURE(order);
+        CAPTURE(nk);
+        const PredictionError direct =
+            arx_prediction_error(y, d.x, nk, order, from, end, integrating);
+        REQUIRE(direct.ok);
+        CHECK(search.estimation_variance(d.x, nk) ==
+              doctest::Approx(direct.estimation_variance).epsilon(1e-7));
+      }
+      // What the direct form refuses, the fast form refuses.
+      CHECK(std::isnan(search.estimation_variance(d.x, from)));  // from < nk + order
+      CHECK(std::isnan(search.estimation_variance(std::vector<double>(10, 1.0), 0)));
+    }
+  }
+  CHECK(std::isnan(PredictionErrorSearch(d.y, 12, 5, 1000).estimation_variance(d.x, 0)));
+}

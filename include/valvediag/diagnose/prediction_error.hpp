@@ -71,4 +71,27 @@ double prediction_bic_change(const PredictionError& model, const PredictionError
 double prediction_validation_deviance(const PredictionError& model,
                                       const PredictionError& reference);
 
+// The estimation part's mean squared one-step prediction error (arx_prediction_error's, not
+// differenced_input) for many valve positions x on the same PV: PV's own columns are summed
+// once, and the sums with x's columns, shifts of one series, by sliding lagged sums - O(N order)
+// per x instead of O(N order^2), for the searches that score thousands of valve positions. Equal
+// to arx_prediction_error's estimation_variance up to rounding (the sums run in another order).
+class PredictionErrorSearch {
+ public:
+  PredictionErrorSearch(const std::vector<double>& y, std::size_t order, std::size_t from,
+                        std::size_t estimation_end, bool integrating = false);
+  // NaN where arx_prediction_error would not be ok (x's length, from < nk + order, too few
+  // samples, a singular or non-finite system).
+  double estimation_variance(const std::vector<double>& x, std::size_t nk) const;
+
+ private:
+  std::vector<double> a_;  // the target: PV, or its change when integrating (a_[0] unused then)
+  std::size_t order_ = 0, ny_ = 0, from_ = 0, end_ = 0;
+  bool integrating_ = false;
+  bool ok_ = false;
+  std::vector<double> yy_;  // PV's columns and the constant: their Gram (ny + 1)^2, row-major
+  std::vector<double> hy_;  // and their sums with the target (ny + 1)
+  double aa_ = 0.0;         // the target's sum of squares
+};
+
 }  // namespace valvediag

@@ -43,9 +43,11 @@ bool refitted_to_prediction(const std::string& effect);
 
 // Refits the block of `effect` in `trial`'s valve chain (the other blocks held) to minimize
 // the one-step prediction error on the estimation part: a grid over the effect's first search
-// coordinate with the others at the trial's values, then Nelder-Mead over all of them from the
-// best point (profiled coordinates, as the valve search's, take their best value at each
-// point). The trial's own parameters are a candidate, so the refit never predicts worse.
+// coordinate with the others at the trial's values; for a friction, a grid over its band (half
+// to 2.2 times that grid's best) and its second coordinate (the whole range); then Nelder-Mead
+// over all of them from the best point (profiled coordinates, as the valve search's, take their
+// best value at each point). The trial's own parameters are a candidate, so the refit never
+// predicts worse. Each point is scored by PredictionErrorSearch at the trial's best dead time.
 PredictionRefit refit_by_prediction(const std::vector<double>& u, const std::vector<double>& y,
                                     double Ts, const ModelFit& trial, const std::string& effect,
                                     const PredictionRefitOptions& opt);
