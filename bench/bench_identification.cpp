@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_timing.hpp"
 #include "valvediag/core/identification.hpp"
 #include "valvediag/core/nnls.hpp"
 #include "valvediag/sim/scenarios.hpp"
@@ -105,11 +106,6 @@ Figures in_child(F&& body) {
   return f;
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -144,7 +140,7 @@ int main(int argc, char** argv) {
       });
       secs.push_back(fast.seconds);
     }
-    const double fast_s = median(secs);
+    const double fast_s = bench::median(secs);
     std::printf("%-9zu %-10s %8.0f %10.3f %12.0f %10.1f %8.2f%%\n", N, "valvediag", fast.configs,
                 fast_s, fast.configs / fast_s, fast.rss_kb / 1024.0, fast.fitness);
     // Baseline on a subset of the grid (nb = 1, na 1..3, nk in {0, 5, 10}, every L): the full

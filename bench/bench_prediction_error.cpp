@@ -12,21 +12,13 @@
 #include <cstdlib>
 #include <vector>
 
+#include "bench_timing.hpp"
 #include "valvediag/diagnose/prediction_error.hpp"
 #include "valvediag/sim/scenarios.hpp"
 #include "valvediag/sim/valve_effects.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;
-
-namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   const int reps = argc > 1 ? std::atoi(argv[1]) : 5;
@@ -58,7 +50,7 @@ int main(int argc, char** argv) {
         worst = std::max(worst, std::abs(a[i] - b[i]) / a[i]);
     }
     const double n = static_cast<double>(xs.size());
-    const double p = median(direct_s) / n * 1e3, s = median(search_s) / n * 1e3;
+    const double p = bench::median(direct_s) / n * 1e3, s = bench::median(search_s) / n * 1e3;
     std::printf(
         "one-step prediction, order %zu, N = %5zu (70 %% estimation), %zu valve positions: "
         "direct %.3f ms, search %.3f ms per position (%.1fx), largest relative difference "

@@ -13,21 +13,13 @@
 #include <thread>
 #include <vector>
 
+#include "bench_timing.hpp"
 #include "valvediag/core/identification.hpp"
 #include "valvediag/core/stiction_quantification.hpp"
 #include "valvediag/sim/scenarios.hpp"
 
 using namespace valvediag;
 using Clock = std::chrono::steady_clock;
-
-namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   const int reps = argc > 1 ? std::max(1, std::atoi(argv[1])) : 3;
@@ -69,7 +61,8 @@ int main(int argc, char** argv) {
     char figures[64];
     std::snprintf(figures, sizeof figures, "%.2f, %.2f", b.overall.fs_percent,
                   b.overall.fd_percent);
-    const double base = median(base_s), fast1 = median(one_s), fastn = median(all_s);
+    const double base = bench::median(base_s), fast1 = bench::median(one_s),
+                 fastn = bench::median(all_s);
     std::printf("%-7zu %11.2f %14.2f %7.1fx %14.2f %7.1fx  %-12s %s\n", N, base, fast1,
                 base / fast1, fastn, base / fastn, figures,
                 same_as_b(a) && same_as_b(c) ? "yes" : "NO");

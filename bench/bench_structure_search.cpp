@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <vector>
 
+#include "bench_timing.hpp"
 #include "valvediag/model/effect_estimators.hpp"
 #include "valvediag/sim/scenarios.hpp"
 
@@ -29,11 +30,6 @@ std::vector<double> backlash(const std::vector<double>& u, double width) {
     x[t] = pos;
   }
   return x;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
 }
 
 }  // namespace
@@ -83,7 +79,7 @@ int main(int argc, char** argv) {
                   std::abs(a[i].sse - b[i].sse) <= 1e-6 * a[i].sse;
     }
     const double n = static_cast<double>(xs.size());
-    const double p = median(plain_s) / n * 1e3, s = median(search_s) / n * 1e3;
+    const double p = bench::median(plain_s) / n * 1e3, s = bench::median(search_s) / n * 1e3;
     std::printf("%-32s %14.3f %14.3f %7.1fx %3d/%zu\n", g.name, p, s, p / s, same, xs.size());
   }
   return 0;
