@@ -40,7 +40,7 @@ struct FitArgs {
   bool verdict = false;  // --verdict: the loop's one verdict too (loop_verdict.hpp)
   // Given on the command line: the ARX orders and Preisach levels bound a --model fit too; the
   // options of the Preisach identification alone are refused with --model.
-  std::vector<CLI::Option*> orders, levels, identification_only;
+  std::vector<CLI::Option*> bounds, identification_only;
 };
 
 // "0.3": the last 30 % held out; "t=600" or "600s": samples from t >= 600 s held out;
@@ -103,11 +103,9 @@ void apply_given_options(const FitArgs& a, const FitOptions& fo, ModelFitOptions
                        " goes with the Preisach identification (fit without --model, --add or "
                        "--remove): leave it out");
   const auto given = [&a](const std::string& name) {
-    for (const CLI::Option* o : a.orders)
-      if (o->check_name(name)) return o->count() > 0;
-    for (const CLI::Option* o : a.levels)
-      if (o->check_name(name)) return o->count() > 0;
-    return false;
+    return std::any_of(a.bounds.begin(), a.bounds.end(), [&name](const CLI::Option* o) {
+      return o->check_name(name) && o->count() > 0;
+    });
   };
   StructureRange& r = mo.structure;
   if (given("--na-min")) r.na_min = fo.na_min;
@@ -261,7 +259,7 @@ void add_fit(CLI::App& app, int& exit_code) {
   add_op_range_option(cmd, a->op_range);
 
   auto* g_m = "Model";
-  a->orders = {cmd->add_option("--na-max", a->fit.na_max, "largest A order (--model: default 2)")
+  a->bounds = {cmd->add_option("--na-max", a->fit.na_max, "largest A order (--model: default 2)")
                    ->group(g_m)
                    ->capture_default_str(),
                cmd->add_option("--nb-max", a->fit.nb_max, "largest B order (--model: default 2)")
@@ -272,8 +270,8 @@ void add_fit(CLI::App& app, int& exit_code) {
                    ->capture_default_str(),
                cmd->add_option("--na-min", a->fit.na_min, "smallest A order")->group(g_m),
                cmd->add_option("--nb-min", a->fit.nb_min, "smallest B order")->group(g_m),
-               cmd->add_option("--nk-min", a->fit.nk_min, "smallest delay")->group(g_m)};
-  a->levels = {cmd->add_option("--L-max", a->fit.L_max,
+               cmd->add_option("--nk-min", a->fit.nk_min, "smallest delay")->group(g_m),
+               cmd->add_option("--L-max", a->fit.L_max,
                                "largest Preisach discretization level (--model: default 16)")
                    ->group(g_m)
                    ->capture_default_str(),
