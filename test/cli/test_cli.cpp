@@ -278,7 +278,10 @@ TEST_CASE("simulate lists and writes scenarios; bad names are user errors") {
 }
 
 TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladder") {
-  REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --out " + tmp("diag.csv")).status == 0);
+  // 2000 samples, not the scenario's 3000: the sanitized build runs this climb (44 s of its CPU
+  // at 3000), and the figures below hold as well (fs 8.34 %, its range 7.9 .. 8.8 %).
+  REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --samples 2000 --out " + tmp("diag.csv"))
+              .status == 0);
   const std::string hist = " --history " + tmp("diag.history.json");
   std::remove(tmp("diag.history.json").c_str());
   auto r = run("diagnose " + tmp("diag.csv") + hist + " --auto --json " + tmp("diag.json"));
