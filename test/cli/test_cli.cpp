@@ -278,8 +278,8 @@ TEST_CASE("simulate lists and writes scenarios; bad names are user errors") {
 }
 
 TEST_CASE("diagnose names the missing effect, writes its JSON keys and the ladder") {
-  // 2000 samples, not the scenario's 3000: the sanitized build runs this climb (44 s of its CPU
-  // at 3000), and the figures below hold as well (fs 8.34 %, its range 7.9 .. 8.8 %).
+  // 2000 samples, not the scenario's 3000: the sanitized build runs this climb (44 s there
+  // at 3000, 33 s at 2000), and the figures below hold as well (fs 8.34 %, range 7.9 .. 8.8 %).
   REQUIRE(run("simulate --scenario paper-ex1 --seed 1 --samples 2000 --out " + tmp("diag.csv"))
               .status == 0);
   const std::string hist = " --history " + tmp("diag.history.json");
