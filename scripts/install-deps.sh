@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages valvediag builds and tests against. Only what is missing.
 set -euo pipefail
-pkgs=(cmake g++ make libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
+pkgs=(cmake g++ make ninja-build libeigen3-dev libnlopt-cxx-dev doctest-dev libcli11-dev nlohmann-json3-dev
       libtomlplusplus-dev libmodbus-dev libsqlite3-dev libmatio-dev gnuplot-nox libpng-dev
       libcpp-httplib-dev libjs-dygraphs)
 # The browser the tests screenshot the pages in (test/report/test_browser.cpp) and drive the

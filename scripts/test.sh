@@ -9,6 +9,10 @@ jobs=$(nproc)
 # Each phase's wall time, for keeping CI within its limit.
 phase() { echo "== test.sh: $1 done at ${SECONDS} s"; }
 phase "dependencies"
+# Ninja for a new build tree (an existing one keeps its generator): it compiles a target's files
+# while the libraries it links are still building, where Make waits, and so keeps both cores busy
+# (the sanitizer build: 198 % of a core against 163 %, 637 s against 836 s on this machine).
+export CMAKE_GENERATOR="${CMAKE_GENERATOR:-Ninja}"
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release
 cmake --build build -j"$jobs"
 phase "Release build"
