@@ -836,20 +836,17 @@ nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt)
       SearchParameter severe = whole;
       severe.lower = s.theta(s.base.data())[o];
       severe.upper = std::min(whole.upper, 3.0 * severe.lower);
-      const auto remap = [&](const SearchParameter& from, const SearchParameter& to) {
-        for (std::vector<double>* z : {&s.base, &s.best_z}) {
-          const double v = from.lower + (*z)[o] * (from.upper - from.lower);
-          (*z)[o] = std::clamp((v - to.lower) / (to.upper - to.lower), 0.0, 1.0);
-        }
+      // The coordinate's box changes: base and best point keep their values (theta, coordinate).
+      const auto rebox = [&](const SearchParameter& to) {
+        const double b = s.theta(s.base.data())[o], best = s.theta(s.best_z.data())[o];
         s.coords[o] = to;
+        s.base[o] = s.coordinate(o, b);
+        s.best_z[o] = s.coordinate(o, best);
       };
-      if (severe.upper > severe.lower * 1.01) {
-        remap(whole, severe);
-        stage({o, o + 1, o + 3}, coarse);
-        remap(severe, whole);
-      } else {
-        stage({o, o + 1, o + 3}, coarse);
-      }
+      const bool narrow = severe.upper > severe.lower * 1.01;
+      if (narrow) rebox(severe);
+      stage({o, o + 1, o + 3}, coarse);
+      if (narrow) rebox(whole);
     }
     s.active = {o, o + 1, o + 2, o + 3, o + 5};
     std::vector<double> z = s.restrict_to_active(s.base);
