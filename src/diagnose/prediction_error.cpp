@@ -108,6 +108,20 @@ PredictionError best_arx_prediction_error(const std::vector<double>& y,
                                           bool differenced_input) {
   PredictionError best;
   if (from < nk_max + order) return best;  // every dead time on the same samples
+  if (!differenced_input) {
+    // The dead time by the search's estimation variances (PV's sums formed once), the full
+    // figures, held-out part included, formed again only at the best one.
+    const PredictionErrorSearch search(y, order, from, estimation_end, integrating);
+    std::size_t best_nk = nk_max + 1;
+    double least = std::numeric_limits<double>::infinity();
+    for (std::size_t nk = 0; nk <= nk_max; ++nk)
+      if (const double v = search.estimation_variance(x, nk); v < least) {
+        least = v;
+        best_nk = nk;
+      }
+    if (best_nk <= nk_max)
+      return arx_prediction_error(y, x, best_nk, order, from, estimation_end, integrating);
+  }
   for (std::size_t nk = 0; nk <= nk_max; ++nk) {
     PredictionError p =
         arx_prediction_error(y, x, nk, order, from, estimation_end, integrating, differenced_input);

@@ -56,6 +56,22 @@ TEST_CASE("best_arx_prediction_error finds the dead time of an ARX system") {
   REQUIRE(short_range.ok);
   CHECK(short_range.estimation_variance > 2.0 * p.estimation_variance);
   CHECK_FALSE(best_arx_prediction_error(y, x, 30, 2, 20, 2000).ok);  // lags before `from`
+  // The profile picks its dead time by PredictionErrorSearch's variances: the same dead time
+  // and figures as fitting every one row by row, levels and changes alike.
+  for (const bool integrating : {false, true}) {
+    PredictionError direct;
+    for (std::size_t nk = 0; nk <= 12; ++nk) {
+      const PredictionError q = arx_prediction_error(y, x, nk, 6, 20, 2000, integrating);
+      if (q.ok && (!direct.ok || q.estimation_variance < direct.estimation_variance)) direct = q;
+    }
+    const PredictionError profiled = best_arx_prediction_error(y, x, 12, 6, 20, 2000, integrating);
+    REQUIRE(direct.ok);
+    REQUIRE(profiled.ok);
+    CHECK(profiled.nk == direct.nk);
+    CHECK(profiled.estimation_variance == direct.estimation_variance);
+    CHECK(profiled.validation_variance == direct.validation_variance);
+    CHECK(profiled.validation_samples == N - 2000);
+  }
 }
 
 // Development seed 48 (the case of test_prediction_error): Kano stiction S 1.97, J 0.48 in a
