@@ -16,7 +16,6 @@ namespace valvediag {
 using detail::data_probe;
 using detail::figures;
 using detail::forc_probe;
-using detail::kNaN;
 using detail::Probe;
 using detail::stiction_sentence;
 using detail::unmeasured;
@@ -319,7 +318,7 @@ StictionQuantification quantify_stiction(const HammersteinModel& model,
     reg.valid = reg.visited && reg.probes > 0;
     if (reg.probes == 0) continue;
     if (!(q.scale > 0)) {
-      reg.figures = {0.0, 0.0, 0.0, 0.0, kNaN};
+      reg.figures = {0.0, 0.0, 0.0, 0.0, detail::kNaN};
       continue;
     }
     const Best rb = search([&](double f_s, double f_d, double ph) {

@@ -25,8 +25,6 @@ namespace valvediag {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 std::size_t estimation_end(std::size_t N, const ModelFitOptions& opt) {
   if (opt.validation_start > 0) return std::min(opt.validation_start, N);
   if (opt.validation_fraction > 0)
@@ -201,7 +199,7 @@ struct Search {
       }
       if (sse < 0) {  // not seen (an sse is >= 0 or NaN)
         const LinearFit f = est.fit(x);
-        sse = f.ok ? f.sse : kNaN;
+        sse = f.ok ? f.sse : std::numeric_limits<double>::quiet_NaN();
         const std::lock_guard<std::mutex> lock(mtx);
         fitted.emplace(key, sse);
       }
@@ -727,7 +725,7 @@ double held_valve_validation_fitness(const ModelFit& fit, const std::vector<doub
   const std::size_t N = y.size(), e0 = fit.estimation_end;
   if (fit.status == ModelFitStatus::NoStableModel || fit.b.empty() || e0 == 0 || e0 >= N ||
       fit.x_hat.size() != N || fit.y_sim.size() != N)
-    return kNaN;
+    return std::numeric_limits<double>::quiet_NaN();
   // The model is linear from x_hat to PV: holding the valve adds the response to the change of
   // x_hat, which is zero before the held-out part.
   const std::size_t na = fit.a.size(), nb = fit.b.size();

@@ -34,7 +34,7 @@ ResidualAnalysis analyse_fit(const IdentificationResult& r, const std::vector<do
 
 namespace {
 
-std::string num(double v, int prec = 4) {
+std::string fit_num(double v, int prec = 4) {
   return report_format::fixed(v, prec);
 }
 
@@ -45,9 +45,9 @@ std::string polynomial(const std::vector<double>& coef, int first_power, bool le
     const double c = coef[i];
     const bool first = !leading_one && i == 0;
     if (first)
-      s << num(c);
+      s << fit_num(c);
     else
-      s << (c < 0 ? " - " : " + ") << num(std::abs(c));
+      s << (c < 0 ? " - " : " + ") << fit_num(std::abs(c));
     s << " q^-" << first_power + static_cast<int>(i);
   }
   return s.str();
@@ -74,22 +74,22 @@ std::vector<const ResidualRegion*> notable_regions(const ResidualAnalysis& a) {
 
 std::string format_where(const ResidualAnalysis& a, const FitContext& ctx) {
   std::ostringstream o;
-  o << "where it fails: residual RMS " << num(a.rms, 3) << ", white-noise level "
-    << num(a.noise_level, 3) << "\n";
+  o << "where it fails: residual RMS " << fit_num(a.rms, 3) << ", white-noise level "
+    << fit_num(a.noise_level, 3) << "\n";
   std::size_t shown = 0;
   for (const auto& iv : a.intervals) {
     if (shown++ == 3) break;
-    o << "           t " << num(time_of(ctx, iv.begin), 1) << " .. "
-      << num(time_of(ctx, iv.end - 1), 1) << " s: " << num(100 * iv.share, 0)
-      << " % of the squared error (RMS " << num(iv.rms, 3) << ")\n";
+    o << "           t " << fit_num(time_of(ctx, iv.begin), 1) << " .. "
+      << fit_num(time_of(ctx, iv.end - 1), 1) << " s: " << fit_num(100 * iv.share, 0)
+      << " % of the squared error (RMS " << fit_num(iv.rms, 3) << ")\n";
   }
   for (const auto* g : notable_regions(a))
-    o << "           " << g->label << ": " << num(100 * g->share, 0) << " % of the error in "
-      << num(100 * g->share / g->excess, 0) << " % of the samples (mean residual "
-      << num(g->mean, 3) << ")\n";
+    o << "           " << g->label << ": " << fit_num(100 * g->share, 0) << " % of the error in "
+      << fit_num(100 * g->share / g->excess, 0) << " % of the samples (mean residual "
+      << fit_num(g->mean, 3) << ")\n";
   for (const auto& t : a.tests)
     if (t.score >= 0.3) {
-      o << "           " << t.name << " " << num(t.score, 2);
+      o << "           " << t.name << " " << fit_num(t.score, 2);
       for (std::size_t i = 0; i < t.effects.size(); ++i) o << (i ? ", " : " -> ") << t.effects[i];
       o << ": " << t.detail << "\n";
     }
@@ -139,37 +139,37 @@ std::string format_stiction(const StictionQuantification& q) {
   o << "stiction:  ";
   if (!q.valid) return o.str() + q.summary + "\n";
   if (q.stiction) {
-    o << "fs " << num(q.overall.fs_percent, 2) << " %, fd " << num(q.overall.fd_percent, 2)
-      << " % of travel (He; band " << num(q.overall.band_percent, 2) << " %, slip jump "
-      << num(q.overall.jump_percent, 2) << " %), resolution " << num(q.resolution_percent, 2)
-      << " %\n";
+    o << "fs " << fit_num(q.overall.fs_percent, 2) << " %, fd " << fit_num(q.overall.fd_percent, 2)
+      << " % of travel (He; band " << fit_num(q.overall.band_percent, 2) << " %, slip jump "
+      << fit_num(q.overall.jump_percent, 2) << " %), resolution "
+      << fit_num(q.resolution_percent, 2) << " %\n";
     if (!q.jump_identified && !q.refined)
       o << "           the data's sweeps are shorter than 2 fs: the split of the band into fs and "
            "fd is not identified\n";
   } else if (q.refined) {
     o << "none resolved ("
       << (q.interval.valid && q.interval.fs_lo > 0
-              ? "He's band " + num(q.overall.band_percent, 2) + " % is below the grid step " +
-                    num(q.resolution_percent, 2) + " %"
+              ? "He's band " + fit_num(q.overall.band_percent, 2) + " % is below the grid step " +
+                    fit_num(q.resolution_percent, 2) + " %"
               : std::string("a valve without stiction fits the data as well"))
-      << "; best fs " << num(q.overall.fs_percent, 2) << " %, fd " << num(q.overall.fd_percent, 2)
-      << " %)\n";
+      << "; best fs " << fit_num(q.overall.fs_percent, 2) << " %, fd "
+      << fit_num(q.overall.fd_percent, 2) << " %)\n";
   } else {
-    o << "none resolved (band below the grid step " << num(q.resolution_percent, 2) << " %)\n";
+    o << "none resolved (band below the grid step " << fit_num(q.resolution_percent, 2) << " %)\n";
   }
   const StictionInterval& iv = q.interval;
   if (iv.valid)
     o << "           the data fit fs "
-      << (iv.fs_open_above ? num(iv.fs_lo, 2) + " % or more (up to the OP span " +
-                                 num(iv.fs_hi, 2) + " %: the data do not bound it)"
-                           : num(iv.fs_lo, 2) + "-" + num(iv.fs_hi, 2) + " %")
-      << ", fd " << num(iv.fd_lo, 2) << "-" << num(iv.fd_hi, 2) << " % within "
-      << num(100 * iv.level(), 0) << " % (profile likelihood, " << num(iv.effective_samples, 0)
-      << " effective samples, lattice step " << num(iv.step_percent, 2) << " %"
-      << (iv.capped ? "; at least that wide" : "") << ")\n";
+      << (iv.fs_open_above ? fit_num(iv.fs_lo, 2) + " % or more (up to the OP span " +
+                                 fit_num(iv.fs_hi, 2) + " %: the data do not bound it)"
+                           : fit_num(iv.fs_lo, 2) + "-" + fit_num(iv.fs_hi, 2) + " %")
+      << ", fd " << fit_num(iv.fd_lo, 2) << "-" << fit_num(iv.fd_hi, 2) << " % within "
+      << fit_num(100 * iv.level(), 0) << " % (profile likelihood, "
+      << fit_num(iv.effective_samples, 0) << " effective samples, lattice step "
+      << fit_num(iv.step_percent, 2) << " %" << (iv.capped ? "; at least that wide" : "") << ")\n";
   if (!q.data_given) o << "           (probed over the whole grid: the OP data was not given)\n";
   for (const auto& g : q.regions) {
-    o << "           OP " << num(g.op_lo, 1) << "-" << num(g.op_hi, 1) << ": ";
+    o << "           OP " << fit_num(g.op_lo, 1) << "-" << fit_num(g.op_hi, 1) << ": ";
     if (!g.visited)
       o << "not visited by the data (" << g.data_reversals << " reversals)";
     else if (!g.valid || !std::isfinite(g.figures.fs_percent))
@@ -177,11 +177,11 @@ std::string format_stiction(const StictionQuantification& q) {
     else if (!g.stiction)
       o << "no stiction resolved";
     else
-      o << "fs " << num(g.figures.fs_percent, 2) << " %, fd " << num(g.figures.fd_percent, 2)
-        << " %"
-        << (std::isfinite(g.fs_lo)
-                ? " (the data fit fs " + num(g.fs_lo, 2) + "-" + num(g.fs_hi, 2) + " % as well)"
-                : std::string());
+      o << "fs " << fit_num(g.figures.fs_percent, 2) << " %, fd "
+        << fit_num(g.figures.fd_percent, 2) << " %"
+        << (std::isfinite(g.fs_lo) ? " (the data fit fs " + fit_num(g.fs_lo, 2) + "-" +
+                                         fit_num(g.fs_hi, 2) + " % as well)"
+                                   : std::string());
     o << "\n";
   }
   return o.str();
@@ -257,8 +257,8 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
   const auto& m = r.model;
   const auto& s = r.best.structure;
   o << "data:      " << ctx.data_name << " (" << ctx.samples << " samples, Ts "
-    << num(ctx.sample_period, 3) << " s, OP " << num(m.grid.umin, 2) << " .. "
-    << num(m.grid.umax, 2) << ")\n";
+    << fit_num(ctx.sample_period, 3) << " s, OP " << fit_num(m.grid.umin, 2) << " .. "
+    << fit_num(m.grid.umax, 2) << ")\n";
   if (r.status == IdentificationStatus::NoStableModel) {
     o << "result:    no stable model in the grid: every fitted linear block had a pole on or "
          "outside the\n"
@@ -276,23 +276,23 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
     o << "           B(q) = " << polynomial(m.b, s.nk + 1, false)
       << "   (||b|| = 1, gain sign in b)\n";
   }
-  o << "           c = " << num(m.c) << "\n";
-  o << "fitness:   " << num(r.fitness_percent, 2)
+  o << "           c = " << fit_num(m.c) << "\n";
+  o << "fitness:   " << fit_num(r.fitness_percent, 2)
     << " % on estimation data (simulated output: the model driven by OP alone)";
   if (std::isfinite(r.validation_fitness_percent))
-    o << ", " << num(r.validation_fitness_percent, 2) << " % on validation data";
+    o << ", " << fit_num(r.validation_fitness_percent, 2) << " % on validation data";
   o << "\n";
   int nz = 0;
   for (double w : m.mu) nz += w > 0;
   o << "valve:     " << nz << " nonzero weights of " << m.grid.relay_count() << " relays (kappa "
-    << num(r.best.kappa, 2) << ", BIC " << num(r.best.bic, 1) << ")\n";
+    << fit_num(r.best.kappa, 2) << ", BIC " << fit_num(r.best.bic, 1) << ")\n";
   o << format_stiction(fit_stiction(r, ctx));
   o << "memory:    initial relay state ";
   if (m.initial_history.size() <= 1) {
     o << "as if OP came up from its minimum\n";
   } else {
     o << "estimated: OP was at level " << m.initial_history[0] << " then " << m.initial_history[1]
-      << " of " << m.grid.L << " before the record (+" << num(r.initial_memory_gain_percent, 2)
+      << " of " << m.grid.L << " before the record (+" << fit_num(r.initial_memory_gain_percent, 2)
       << " fitness points)\n";
   }
   o << "identifiability: " << r.identifiability.summary << "\n";
@@ -301,7 +301,7 @@ std::string format_summary(const IdentificationResult& r, const FitContext& ctx)
   for (const auto& c : r.configurations) unstable += !c.stable;
   o << "solver:    " << to_string(r.best.status) << " (" << r.best.stop_reason << "); "
     << r.configurations.size() << " configurations (" << unstable << " rejected as unstable), "
-    << r.total_iterations << " solver iterations, " << num(r.elapsed_s, 3) << " s\n";
+    << r.total_iterations << " solver iterations, " << fit_num(r.elapsed_s, 3) << " s\n";
   return o.str();
 }
 

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "valvediag/io/atomic_file.hpp"
+#include "valvediag/report/json_number.hpp"
 
 namespace valvediag {
 
@@ -53,9 +54,6 @@ std::string history_file_in(const std::string& state_dir, std::uint64_t key) {
 
 namespace {
 
-nlohmann::json num(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
-}
 double num_of(const nlohmann::json& j) {
   return j.is_number() ? j.get<double>() : std::nan("");
 }
@@ -81,8 +79,8 @@ nlohmann::json json_of(const HistoryEntry& h) {
   for (const auto& v : h.parameters)
     p.push_back({{"name", v.name}, {"value", v.value}, {"unit", v.unit}});
   return {{"model", h.model},
-          {"fitness_percent", num(h.fitness_percent)},
-          {"validation_fitness_percent", num(h.validation_fitness_percent)},
+          {"fitness_percent", json_number(h.fitness_percent)},
+          {"validation_fitness_percent", json_number(h.validation_fitness_percent)},
           {"parameters", p},
           {"na", h.na},
           {"nb", h.nb},

@@ -11,6 +11,7 @@
 #include "valvediag/diagnose/verdict.hpp"
 #include "valvediag/report/diagnosis_report.hpp"
 #include "valvediag/report/html_report.hpp"
+#include "valvediag/report/json_number.hpp"
 
 namespace valvediag {
 
@@ -18,9 +19,6 @@ namespace {
 
 using nlohmann::json;
 
-json number(double v) {
-  return std::isfinite(v) ? json(v) : json(nullptr);
-}
 double number_of(const json& j, const char* key) {
   if (!j.contains(key) || j[key].is_null()) return LoopAssessment::kNaN;
   if (!j[key].is_number()) throw std::runtime_error(std::string("'") + key + "' must be a number");
@@ -77,36 +75,36 @@ json assessment_json(const LoopAssessment& a) {
   j["verdict"] = a.verdict;
   j["reason"] = a.reason;
   j["severity"] = a.severity;
-  j["stiction_percent"] = number(a.stiction_percent);
-  j["slip_jump_percent"] = number(a.slip_jump_percent);
-  j["stiction_lo_percent"] = number(a.stiction_lo_percent);
-  j["stiction_hi_percent"] = number(a.stiction_hi_percent);
+  j["stiction_percent"] = json_number(a.stiction_percent);
+  j["slip_jump_percent"] = json_number(a.slip_jump_percent);
+  j["stiction_lo_percent"] = json_number(a.stiction_lo_percent);
+  j["stiction_hi_percent"] = json_number(a.stiction_hi_percent);
   j["stiction_hi_open"] = a.stiction_hi_open;
-  j["prediction_stiction_percent"] = number(a.prediction_stiction_percent);
+  j["prediction_stiction_percent"] = json_number(a.prediction_stiction_percent);
   j["model"] = a.model;
-  j["fitness_percent"] = number(a.fitness_percent);
-  j["validation_fitness_percent"] = number(a.validation_fitness_percent);
+  j["fitness_percent"] = json_number(a.fitness_percent);
+  j["validation_fitness_percent"] = json_number(a.validation_fitness_percent);
   j["first_missing"] = a.first_missing;
   j["analysed_from_s"] = a.analysed_from_s;
   json ladder = json::array();
   for (const auto& s : a.ladder)
     ladder.push_back({{"model", s.model},
-                      {"fitness_percent", number(s.fitness_percent)},
-                      {"validation_fitness_percent", number(s.validation_fitness_percent)}});
+                      {"fitness_percent", json_number(s.fitness_percent)},
+                      {"validation_fitness_percent", json_number(s.validation_fitness_percent)}});
   j["ladder"] = ladder;
   const LoopHealth& h = a.health;
   j["health"] = {{"samples", h.samples},
                  {"duration_s", h.duration_s},
                  {"oscillating", h.oscillating},
-                 {"period_s", number(h.period_s)},
-                 {"regularity", number(h.regularity)},
-                 {"amplitude", number(h.amplitude)},
+                 {"period_s", json_number(h.period_s)},
+                 {"regularity", json_number(h.regularity)},
+                 {"amplitude", json_number(h.amplitude)},
                  {"signal", h.signal},
-                 {"op_reversals_per_hour", number(h.op_reversals_per_hour)},
-                 {"op_travel_percent_per_hour", number(h.op_travel_percent_per_hour)},
-                 {"time_at_limits_percent", number(h.time_at_limits_percent)},
-                 {"op_noise", number(h.op_noise)},
-                 {"op_span_percent", number(h.op_span_percent)}};
+                 {"op_reversals_per_hour", json_number(h.op_reversals_per_hour)},
+                 {"op_travel_percent_per_hour", json_number(h.op_travel_percent_per_hour)},
+                 {"time_at_limits_percent", json_number(h.time_at_limits_percent)},
+                 {"op_noise", json_number(h.op_noise)},
+                 {"op_span_percent", json_number(h.op_span_percent)}};
   j["limit_cycle"] = limit_cycle_json(a.limit_cycle);
   j["whole_record"] = whole_record_json(a.whole_record);
   j["valve_travel"] = valve_travel_json(a.valve_travel);

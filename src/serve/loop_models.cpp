@@ -9,6 +9,7 @@
 #include "valvediag/io/data_checks.hpp"
 #include "valvediag/report/diagnosis_report.hpp"
 #include "valvediag/report/html_report.hpp"
+#include "valvediag/report/json_number.hpp"
 #include "valvediag/serve/workbench_api.hpp"
 
 namespace valvediag::serve {
@@ -16,10 +17,6 @@ namespace valvediag::serve {
 namespace {
 
 using nlohmann::json;
-
-json number(double x) {
-  return std::isfinite(x) ? json(x) : json();
-}
 
 std::string number_text(double x) {
   char b[32];
@@ -65,8 +62,8 @@ json append_to_file(const std::string& file, const std::vector<HistoryEntry>& en
 // What a job fitted: the samples and their time span, the held-out share.
 json data_summary(const LoopData& d, double validate) {
   return {{"samples", d.size()},
-          {"from_s", number(d.t.empty() ? NAN : d.t.front())},
-          {"to_s", number(d.t.empty() ? NAN : d.t.back())},
+          {"from_s", json_number(d.t.empty() ? NAN : d.t.front())},
+          {"to_s", json_number(d.t.empty() ? NAN : d.t.back())},
           {"validate", validate}};
 }
 
@@ -74,8 +71,8 @@ json step_summary(std::size_t n, const ModelStep& s) {
   return {{"step", n},
           {"model", s.entry.model},
           {"action", s.action},
-          {"fitness_percent", number(s.entry.fitness_percent)},
-          {"validation_fitness_percent", number(s.entry.validation_fitness_percent)},
+          {"fitness_percent", json_number(s.entry.fitness_percent)},
+          {"validation_fitness_percent", json_number(s.entry.validation_fitness_percent)},
           {"data", data_summary(*s.data, s.validate)}};
 }
 
@@ -343,16 +340,16 @@ json ladder_json(const LoopModels& models) {
     const ModelStep& s = *steps[n];
     json r = step_summary(n, s);
     const auto change = [&](double now, double before) {
-      return n > 0 ? number(now - before) : json();
+      return n > 0 ? json_number(now - before) : json();
     };
     const HistoryEntry* p = n > 0 ? &steps[n - 1]->entry : nullptr;
     r["fitness_change"] = p ? change(s.entry.fitness_percent, p->fitness_percent) : json();
     r["validation_fitness_change"] =
         p ? change(s.entry.validation_fitness_percent, p->validation_fitness_percent) : json();
     json params = json::object();
-    for (const auto& v : s.entry.parameters) params[v.name] = number(v.value);
+    for (const auto& v : s.entry.parameters) params[v.name] = json_number(v.value);
     r["parameters"] = params;
-    r["estimation_end_s"] = number(t_at(*s.data, s.fit.estimation_end));
+    r["estimation_end_s"] = json_number(t_at(*s.data, s.fit.estimation_end));
     r["valve_effect"] = has_valve_effect(s.fit.spec);
     r["time"] = s.entry.time;
     rows.push_back(std::move(r));
@@ -371,8 +368,8 @@ json simulation_json(const ModelStep& s, const LoopData& d, double from, double 
   json j = decimated_columns(d.t, {{"pv", &d.pv}, {"pv_sim", &s.fit.y_sim}, {"residual", &res}},
                              from, to, buckets);
   j["model"] = s.entry.model;
-  j["estimation_end_s"] = number(t_at(d, s.fit.estimation_end));
-  j["first_sample_s"] = number(t_at(d, s.fit.first_sample));
+  j["estimation_end_s"] = json_number(t_at(d, s.fit.estimation_end));
+  j["first_sample_s"] = json_number(t_at(d, s.fit.first_sample));
   return j;
 }
 

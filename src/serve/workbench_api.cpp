@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "valvediag/core/cancel.hpp"
+#include "valvediag/report/json_number.hpp"
 #include "valvediag/serve/static_files.hpp"
 #include "valvediag/util/utc_time.hpp"
 
@@ -109,10 +110,6 @@ int whole_number(const std::string& name, const std::string& text, int lo, int h
     throw BadRequest("parameter '" + name + "' must be a whole number from " + std::to_string(lo) +
                      " to " + std::to_string(hi) + ", got '" + text.substr(0, 40) + "'");
   return n;
-}
-
-json number(double x) {
-  return std::isfinite(x) ? json(x) : json();
 }
 
 // The held-out share parameter: a job's bounds.
@@ -524,13 +521,13 @@ json WorkbenchApi::loops_json() const {
                     {"name", loops_[i].name},
                     {"source", d.source},
                     {"samples", d.size()},
-                    {"sample_period_s", number(d.sample_period())},
-                    {"start_s", number(start)},
-                    {"end_s", number(d.t.empty() ? NAN : d.t.back())},
+                    {"sample_period_s", json_number(d.sample_period())},
+                    {"start_s", json_number(start)},
+                    {"end_s", json_number(d.t.empty() ? NAN : d.t.back())},
                     {"start_clock", clock},
                     {"signals", signals},
                     {"verdict", verdict},
-                    {"analysed_start_s", number(m.t.empty() ? NAN : m.t.front())},
+                    {"analysed_start_s", json_number(m.t.empty() ? NAN : m.t.front())},
                     {"validate", model_options_.validate},
                     {"live", static_cast<bool>(loops_[i].live)}});
   }
@@ -622,8 +619,8 @@ json decimated_columns(const std::vector<double>& tt, const std::vector<Column>&
         mn = std::fmin(mn, (*s.c.x)[i]);
         mx = std::fmax(mx, (*s.c.x)[i]);
       }
-      s.lo.push_back(number(mn));
-      s.hi.push_back(number(mx));
+      s.lo.push_back(json_number(mn));
+      s.hi.push_back(json_number(mx));
     }
   }
   json j{{"from", from},     {"to", to},          {"samples", m},
@@ -674,7 +671,7 @@ json decimated_path(const std::vector<double>& tt, const std::vector<Column>& co
     index.push_back(i);
     held.push_back(i >= held_out_from);
     for (std::size_t c = 0; c < columns.size(); ++c)
-      cols[c].push_back(number(value(columns[c], i)));
+      cols[c].push_back(json_number(value(columns[c], i)));
   }
   json j{{"from", from},          {"to", to},          {"samples", m},
          {"points", keep.size()}, {"t", std::move(t)}, {"index", std::move(index)}};

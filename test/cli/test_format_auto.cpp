@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "../common/run_cli.hpp"
+#include "../common/text.hpp"
 
 namespace fs = std::filesystem;
 using valvediag::test::CliResult;
@@ -16,13 +17,11 @@ namespace {
 const std::string kExport = std::string(VALVEDIAG_DATA_DIR) +
                             "/plant-loops/stiction/stic_2111FIC46005_0902_0003_Stick1=0.txt";
 
-CliResult run(const std::vector<std::string>& args) {
+CliResult run_auto(const std::vector<std::string>& args) {
   return valvediag::test::run_cli(VALVEDIAG_BIN, args, VALVEDIAG_TMP, 120.0);
 }
 
-bool has(const std::string& s, const std::string& part) {
-  return s.find(part) != std::string::npos;
-}
+using valvediag::test::has;
 
 const std::vector<std::string> kSmall = {"--na-max", "1", "--nb-max",    "1", "--nk-max", "2",
                                          "--L-max",  "8", "--no-history"};
@@ -36,14 +35,14 @@ std::vector<std::string> fit(std::vector<std::string> args) {
 }  // namespace
 
 TEST_CASE("fit reads a historian export with no layout options and shows what it chose") {
-  const CliResult r = run(fit({}));
+  const CliResult r = run_auto(fit({}));
   CHECK(r.status == 0);
   CHECK(has(r.out,
             "note: read as --skip-lines 2 --skip-after-header 2 --time-format '%Y-%m-%d "
             "%H:%M:%S' --t 1 --op '*.MV' --pv '*.PV' --sp '*.SV' (found by --format auto)\n"));
   CHECK(has(r.out, "(751 samples, Ts 10.000 s"));
   // Options given win, and are not repeated in the note.
-  const CliResult g = run(fit({"--pv", "3", "--sp", "none"}));
+  const CliResult g = run_auto(fit({"--pv", "3", "--sp", "none"}));
   CHECK(g.status == 0);
   CHECK(has(g.out,
             "note: columns: t = 'tagname' (1), op = '2111FIC46005.MV' (2), pv = "
@@ -54,7 +53,7 @@ TEST_CASE("fit reads a historian export with no layout options and shows what it
 }
 
 TEST_CASE("--format plain reads with the options alone; other values are refused") {
-  const CliResult p = run(
+  const CliResult p = run_auto(
       fit({"--format", "plain", "--skip-lines", "2", "--t", "1", "--op", "*.MV", "--pv", "*.PV"}));
   CHECK(p.status == 2);
   CHECK(has(p.out,
@@ -62,7 +61,7 @@ TEST_CASE("--format plain reads with the options alone; other values are refused
             "descriptions under the header row?); skip the lines up to 5 with "
             "--skip-after-header 2"));
   CHECK_FALSE(has(p.out, "read as"));
-  const CliResult bad = run(fit({"--format", "excel"}));
+  const CliResult bad = run_auto(fit({"--format", "excel"}));
   CHECK(bad.status == 2);
   CHECK(has(bad.out, "--format"));
 }

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "../common/run_cli.hpp"
+#include "../common/text.hpp"
 #include "../io/mat_fixtures.hpp"
 
 namespace fs = std::filesystem;
@@ -21,8 +22,8 @@ namespace fs = std::filesystem;
 namespace {
 
 const fs::path kRoot = fs::path(VALVEDIAG_TMP) / "history-test";
-const std::vector<std::string> kSmallGrid{"--na-max", "1", "--nb-max", "1",
-                                          "--nk-max", "2", "--L-max",  "8"};
+const std::vector<std::string> kHistoryGrid{"--na-max", "1", "--nb-max", "1",
+                                            "--nk-max", "2", "--L-max",  "8"};
 
 // valvediag in `cwd` with `env` ("NAME=VALUE", "-NAME" removes).
 valvediag::test::CliResult vd(std::vector<std::string> args, const std::vector<std::string>& env,
@@ -47,12 +48,7 @@ std::string history_of(const std::string& out) {
   return out.substr(from, out.find(" (", from) - from);
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+using valvediag::test::slurp;
 
 // A fresh kRoot with data/loop.csv (600 samples of the paper's linear loop), an empty home/ and
 // an empty cwd/ to run in.
@@ -69,10 +65,7 @@ fs::path fresh_root() {
   return kRoot / "data" / "loop.csv";
 }
 
-std::vector<std::string> with(std::vector<std::string> a, const std::vector<std::string>& b) {
-  a.insert(a.end(), b.begin(), b.end());
-  return a;
-}
+using valvediag::test::with;
 
 }  // namespace
 
@@ -90,7 +83,7 @@ TEST_CASE("fit, diagnose, report and ladder write only where asked and in the st
   const std::string hist = history_of(lin.out);
   CHECK(hist.starts_with(state + "/history/"));
   CHECK(lin.out.find("model history: " + hist + " (1 fit)") != std::string::npos);
-  const auto pre = vd(with({"fit", csv}, kSmallGrid), env);
+  const auto pre = vd(with({"fit", csv}, kHistoryGrid), env);
   INFO(pre.out);
   CHECK(pre.status == 0);
   CHECK(pre.out.find("model history: " + hist + " (2 fits)") != std::string::npos);
@@ -164,7 +157,7 @@ TEST_CASE("a junk history or no usable state directory: the fit's summary, exit 
   const std::string csv = fresh_root().string();
   const fs::path junk = kRoot / "out" / "junk.json";
   std::ofstream(junk) << "not a history {";
-  for (const auto& args : {with({"fit", csv}, kSmallGrid),
+  for (const auto& args : {with({"fit", csv}, kHistoryGrid),
                            std::vector<std::string>{"fit", csv, "--model", "linear"}}) {
     const auto r = vd(with(args, {"--history", junk.string()}), {});
     INFO(r.out);

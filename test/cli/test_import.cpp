@@ -13,6 +13,7 @@
 #include "../common/run_cli.hpp"
 #include "../common/sanitized.hpp"
 #include "../common/sqlite_exec.hpp"
+#include "../common/text.hpp"
 #include "../io/mat_fixtures.hpp"
 
 namespace fs = std::filesystem;
@@ -30,17 +31,15 @@ fs::path tmp_dir() {
   return p;
 }
 
-std::string tmp(const std::string& name) {
+std::string import_tmp(const std::string& name) {
   return (tmp_dir() / name).string();
 }
 
-CliResult run(const std::vector<std::string>& args) {
+CliResult run_import(const std::vector<std::string>& args) {
   return valvediag::test::run_cli(VALVEDIAG_BIN, args, tmp_dir(), 300.0);
 }
 
-bool has(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
-}
+using valvediag::test::has;
 
 std::string read_file(const fs::path& p) {
   std::ifstream f(p, std::ios::binary);
@@ -58,18 +57,15 @@ std::string line_with(const std::string& text, const std::string& part) {
   return "";
 }
 
-std::vector<std::string> with(std::vector<std::string> a, const std::vector<std::string>& b) {
-  a.insert(a.end(), b.begin(), b.end());
-  return a;
-}
+using valvediag::test::with;
 
-const std::vector<std::string> kSmallGrid{"--na-max", "1", "--nb-max",    "1", "--nk-max", "2",
-                                          "--L-max",  "8", "--no-history"};
+const std::vector<std::string> kImportGrid{"--na-max", "1", "--nb-max",    "1", "--nk-max", "2",
+                                           "--L-max",  "8", "--no-history"};
 
 }  // namespace
 
 TEST_CASE("import lists the loops of the stiction database benchmark") {
-  const CliResult r = run({"import", kBenchmark});
+  const CliResult r = run_import({"import", kBenchmark});
   INFO(r.out);
   CHECK(r.status == 0);
   CHECK(has(r.out, "93 loop(s)"));
@@ -85,28 +81,28 @@ TEST_CASE("import lists the loops of the stiction database benchmark") {
   CHECK(has(r.out, "no loop has PV"));
 
   SUBCASE("a loop without PV: a clear message, exit status 2") {
-    const CliResult f = run({"fit", kBenchmark, "--loop", "chemicals.loop23"});
+    const CliResult f = run_import({"fit", kBenchmark, "--loop", "chemicals.loop23"});
     CHECK(f.status == 2);
     CHECK(has(f.out,
               "loop 'benchmark.chemicals.loop23': no PV field (fields present: "
               "oscillation, Ts, OP)"));
-    const CliResult d =
-        run({"import", kBenchmark, "--loop", "chemicals.loop23", "--db", tmp("nopv.sqlite")});
+    const CliResult d = run_import(
+        {"import", kBenchmark, "--loop", "chemicals.loop23", "--db", import_tmp("nopv.sqlite")});
     CHECK(d.status == 2);
     CHECK(has(d.out, "no PV field"));
   }
   SUBCASE("several loops and no --loop: the message lists them") {
-    const CliResult f = run({"fit", kBenchmark});
+    const CliResult f = run_import({"fit", kBenchmark});
     CHECK(f.status == 2);
     CHECK(has(f.out, "93 loops in the file; choose one with --loop PATH"));
     CHECK(has(f.out, "benchmark.buildings.loop1"));
   }
   SUBCASE("an OP-only loop imports as t, op") {
-    const CliResult i =
-        run({"import", kBenchmark, "--loop", "chemicals.loop23", "--out", tmp("l23.csv")});
+    const CliResult i = run_import(
+        {"import", kBenchmark, "--loop", "chemicals.loop23", "--out", import_tmp("l23.csv")});
     CHECK(i.status == 0);
     CHECK(has(i.out, "1500 samples"));
-    std::ifstream f(tmp("l23.csv"));
+    std::ifstream f(import_tmp("l23.csv"));
     std::string header;
     std::getline(f, header);
     CHECK(header == "t,op");
@@ -114,21 +110,23 @@ TEST_CASE("import lists the loops of the stiction database benchmark") {
 }
 
 TEST_CASE("import a loop of a .mat file to CSV, to a recording, or fit the .mat directly") {
-  const std::string mat = tmp("runs.mat");
+  const std::string mat = import_tmp("runs.mat");
   valvediag::test::write_runs_file(mat, MAT_FT_MAT5, MAT_COMPRESSION_ZLIB);
 
-  const CliResult list = run({"import", mat});
+  const CliResult list = run_import({"import", mat});
   INFO(list.out);
   CHECK(list.status == 0);
   CHECK(has(list.out, "2 loop(s)"));
   CHECK(has(line_with(list.out, "runs(2)"), "OP PV SP"));
 
-  const CliResult to_csv = run({"import", mat, "--loop", "runs(2)", "--out", tmp("r2.csv")});
+  const CliResult to_csv =
+      run_import({"import", mat, "--loop", "runs(2)", "--out", import_tmp("r2.csv")});
   CHECK(to_csv.status == 0);
-  CHECK(has(to_csv.out, "wrote " + tmp("r2.csv") + ": 400 samples of loop runs(2) (Ts 0.5 s)"));
+  CHECK(has(to_csv.out,
+            "wrote " + import_tmp("r2.csv") + ": 400 samples of loop runs(2) (Ts 0.5 s)"));
 
-  const CliResult from_csv = run(with({"fit", tmp("r2.csv")}, kSmallGrid));
-  const CliResult direct = run(with({"fit", mat, "--loop", "runs(2)"}, kSmallGrid));
+  const CliResult from_csv = run_import(with({"fit", import_tmp("r2.csv")}, kImportGrid));
+  const CliResult direct = run_import(with({"fit", mat, "--loop", "runs(2)"}, kImportGrid));
   INFO(from_csv.out);
   INFO(direct.out);
   CHECK(from_csv.status == 0);
@@ -139,40 +137,41 @@ TEST_CASE("import a loop of a .mat file to CSV, to a recording, or fit the .mat 
   CHECK(line_with(direct.out, "fitness:") == fitness);  // the same data, bit for bit
 
   SUBCASE("into a recording: fit --db --loop reads it") {
-    const std::string db = tmp("imported.sqlite");
+    const std::string db = import_tmp("imported.sqlite");
     fs::remove(db);
-    const CliResult i = run({"import", mat, "--loop", "runs(2)", "--db", db});
+    const CliResult i = run_import({"import", mat, "--loop", "runs(2)", "--db", db});
     INFO(i.out);
     CHECK(i.status == 0);
     CHECK(has(i.out, "stored loop runs_2 in " + db));
-    const CliResult f = run(with({"fit", "--db", db, "--loop", "runs_2"}, kSmallGrid));
+    const CliResult f = run_import(with({"fit", "--db", db, "--loop", "runs_2"}, kImportGrid));
     INFO(f.out);
     CHECK(f.status == 0);
     CHECK(line_with(f.out, "fitness:") == fitness);
   }
   SUBCASE("every loop into a folder") {
-    const std::string dir = tmp("all");
+    const std::string dir = import_tmp("all");
     fs::remove_all(dir);
-    const CliResult i = run({"import", mat, "--out-dir", dir});
+    const CliResult i = run_import({"import", mat, "--out-dir", dir});
     CHECK(i.status == 0);
     CHECK(has(i.out, "2 loop(s) written"));
     CHECK(fs::exists(fs::path(dir) / "runs_1.csv"));
     CHECK(fs::exists(fs::path(dir) / "runs_2.csv"));
   }
   SUBCASE("wrong uses: exit status 2 with a message") {
-    CHECK(run({"import", tmp("r2.csv")}).status == 2);
-    const CliResult nowhere = run({"import", mat, "--loop", "runs(2)"});
+    CHECK(run_import({"import", import_tmp("r2.csv")}).status == 2);
+    const CliResult nowhere = run_import({"import", mat, "--loop", "runs(2)"});
     CHECK(nowhere.status == 2);
     CHECK(has(nowhere.out, "--out"));
-    CHECK(run({"import", mat, "--loop", "runs(9)", "--out", tmp("x.csv")}).status == 2);
-    const CliResult csv_loop = run({"fit", tmp("r2.csv"), "--loop", "runs(2)"});
+    CHECK(run_import({"import", mat, "--loop", "runs(9)", "--out", import_tmp("x.csv")}).status ==
+          2);
+    const CliResult csv_loop = run_import({"fit", import_tmp("r2.csv"), "--loop", "runs(2)"});
     CHECK(csv_loop.status == 2);
     CHECK(has(csv_loop.out, "--loop goes with --db or a .mat file"));
-    const CliResult csv_opt = run({"fit", mat, "--loop", "runs(2)", "--delimiter", "tab"});
+    const CliResult csv_opt = run_import({"fit", mat, "--loop", "runs(2)", "--delimiter", "tab"});
     CHECK(csv_opt.status == 2);
     CHECK(has(csv_opt.out, "for CSV files, not .mat"));
-    std::ofstream(tmp("garbage.mat")) << std::string(300, 'x');
-    const CliResult garbage = run({"fit", tmp("garbage.mat")});
+    std::ofstream(import_tmp("garbage.mat")) << std::string(300, 'x');
+    const CliResult garbage = run_import({"fit", import_tmp("garbage.mat")});
     CHECK(garbage.status == 2);
     CHECK(has(garbage.out, "not a MATLAB v5/v7/v7.3 MAT-file"));
   }
@@ -180,15 +179,15 @@ TEST_CASE("import a loop of a .mat file to CSV, to a recording, or fit the .mat 
 
 TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only loops" *
           valvediag::test::release_only()) {
-  const std::string mat = tmp("sweep-runs.mat");
+  const std::string mat = import_tmp("sweep-runs.mat");
   valvediag::test::write_runs_file(mat, MAT_FT_MAT5, MAT_COMPRESSION_NONE, 1500);
-  const std::string out = tmp("sweep-mat.json");
+  const std::string out = import_tmp("sweep-mat.json");
   fs::remove(out);
-  const fs::path pages = tmp("sweep-mat-pages");
+  const fs::path pages = import_tmp("sweep-mat-pages");
   fs::remove_all(pages);
-  const CliResult r =
-      run({"sweep", mat, kBenchmark, "--loops", "runs(*),benchmark.power.*", "--jobs", "2",
-           "--json", out, "--reports", pages.string(), "--html", (pages / "index.html").string()});
+  const CliResult r = run_import({"sweep", mat, kBenchmark, "--loops", "runs(*),benchmark.power.*",
+                                  "--jobs", "2", "--json", out, "--reports", pages.string(),
+                                  "--html", (pages / "index.html").string()});
   INFO(r.out);
   REQUIRE(r.status == 0);
   CHECK(has(r.out, "sweep: 7 loop(s)"));
@@ -240,7 +239,7 @@ TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only
                                           "benchmark.power.loop5", "runs(1)", "runs(2)"});
 
   // A name or pattern that selects nothing is a typo: said before any loop runs.
-  const CliResult typo = run({"sweep", mat, "--loops", "runs(*),benchmark.metal.*"});
+  const CliResult typo = run_import({"sweep", mat, "--loops", "runs(*),benchmark.metal.*"});
   CHECK(typo.status == 2);
   CHECK(has(typo.out,
             "--loops: no loop 'benchmark.metal.*' in the data files; its loops: "
@@ -250,16 +249,17 @@ TEST_CASE("sweep over .mat files: every loop of each, chosen by pattern; OP-only
 TEST_CASE("Tennessee Eastman m1d14: the cooling-water loop named by matrix columns" *
           valvediag::test::release_only()) {
   const std::vector<std::string> loop{"--op", "51", "--pv", "21", "--sample-period", "36"};
-  const CliResult list = run({"import", kTe14});
+  const CliResult list = run_import({"import", kTe14});
   CHECK(list.status == 0);
   CHECK(has(line_with(list.out, "  m1d14 "), "matrix, 81 columns"));
 
-  const CliResult i = run(with({"import", kTe14, "--loop", "m1d14", "--out", tmp("te.csv")}, loop));
+  const CliResult i =
+      run_import(with({"import", kTe14, "--loop", "m1d14", "--out", import_tmp("te.csv")}, loop));
   INFO(i.out);
   CHECK(i.status == 0);
   CHECK(has(i.out, "op column 51, pv column 21, Ts 36 s"));
   CHECK(has(i.out, "7201 samples of loop m1d14 (Ts 36 s)"));
-  std::ifstream f(tmp("te.csv"));
+  std::ifstream f(import_tmp("te.csv"));
   std::string line, last;
   std::size_t rows = 0;
   std::getline(f, line);
@@ -271,11 +271,11 @@ TEST_CASE("Tennessee Eastman m1d14: the cooling-water loop named by matrix colum
   CHECK(rows == 7201);
   CHECK(last.rfind("259200,", 0) == 0);  // 72 h
 
-  const CliResult fit = run(with(with({"fit", kTe14}, loop), kSmallGrid));
+  const CliResult fit = run_import(with(with({"fit", kTe14}, loop), kImportGrid));
   INFO(fit.out);
   CHECK(fit.status == 0);
   CHECK(has(fit.out, "m1d14.mat:m1d14 (7201 samples, Ts 36.000 s"));
-  const CliResult no_period = run({"fit", kTe14, "--op", "51", "--pv", "21"});
+  const CliResult no_period = run_import({"fit", kTe14, "--op", "51", "--pv", "21"});
   CHECK(no_period.status == 2);
   CHECK(has(no_period.out, "--sample-period"));
 }
@@ -289,9 +289,9 @@ TEST_CASE("a damaged .mat file is a clear error, never a crash of the command") 
     INFO(name);
     for (const auto& args : std::vector<std::vector<std::string>>{
              {"import", mat},
-             {"import", mat, "--loop", "runs(1)", "--out", tmp("damaged.csv")},
+             {"import", mat, "--loop", "runs(1)", "--out", import_tmp("damaged.csv")},
              {"diagnose", mat, "--loop", "runs(1)", "--no-history"}}) {
-      const CliResult r = run(args);
+      const CliResult r = run_import(args);
       INFO(r.out);
       CHECK(r.status == 2);
       CHECK(has(r.out, mat + ": "));
@@ -301,44 +301,44 @@ TEST_CASE("a damaged .mat file is a clear error, never a crash of the command") 
 }
 
 TEST_CASE("a .mat loop and a recording obey --max-rows and the 1e12 bound as a CSV file does") {
-  const std::string mat = tmp("capped.mat");
+  const std::string mat = import_tmp("capped.mat");
   valvediag::test::write_runs_file(mat);
-  const CliResult m = run({"fit", mat, "--loop", "runs(2)", "--max-rows", "100", "--no-history"});
+  const CliResult m =
+      run_import({"fit", mat, "--loop", "runs(2)", "--max-rows", "100", "--no-history"});
   INFO(m.out);
   CHECK(m.status == 2);
   CHECK(has(m.out,
             "loop 'runs(2)': field op has 400 samples, more than 100, the --max-rows limit "
             "that keeps memory bounded"));
-  const std::string db = tmp("capped.sqlite");
+  const std::string db = import_tmp("capped.sqlite");
   for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(db + suffix);
-  REQUIRE(run({"import", mat, "--loop", "runs(2)", "--db", db}).status == 0);
-  const CliResult d = run({"fit", "--db", db, "--loop", "runs_2", "--max-rows", "100"});
+  REQUIRE(run_import({"import", mat, "--loop", "runs(2)", "--db", db}).status == 0);
+  const CliResult d = run_import({"fit", "--db", db, "--loop", "runs_2", "--max-rows", "100"});
   INFO(d.out);
   CHECK(d.status == 2);
   CHECK(has(d.out, db + ": run 1, loop runs_2: more than 100 rows in the range, the --max-rows "
                         "limit that keeps memory bounded"));
   CHECK(has(d.out, "or a shorter range (--from/--to)"));
   // Within the cap: read as before.
-  CHECK(
-      run(with({"fit", "--db", db, "--loop", "runs_2", "--max-rows", "400"}, kSmallGrid)).status ==
-      0);
+  CHECK(run_import(with({"fit", "--db", db, "--loop", "runs_2", "--max-rows", "400"}, kImportGrid))
+            .status == 0);
 
   // A stored value no instrument gives (a corrupt row): refused naming run, loop and tick, by
   // the analysis commands and in a sweep.
   valvediag::test::exec_sql(db, "UPDATE samples SET op = 5e13 WHERE tick = 10");
   const std::string where =
       db + ": column 'op': run 1, loop runs_2, tick 10 (t = 5 s): 5e+13 is no measurement";
-  const CliResult f = run(with({"fit", "--db", db, "--loop", "runs_2"}, kSmallGrid));
+  const CliResult f = run_import(with({"fit", "--db", db, "--loop", "runs_2"}, kImportGrid));
   INFO(f.out);
   CHECK(f.status == 2);
   CHECK(has(f.out, where));
-  const std::string site = tmp("capped.toml");
+  const std::string site = import_tmp("capped.toml");
   std::ofstream(site) << "[[bus]]\nname = \"plc\"\nprotocol = \"modbus-tcp\"\n"
                          "controller = \"tcp://127.0.0.1:1\"\n"
                          "[[loop]]\nname = \"runs_2\"\nbus = \"plc\"\nsample_period = 0.5\n"
                          "op = { register = \"holding\", address = 0, type = \"FLOAT32\" }\n"
                          "pv = { register = \"holding\", address = 2, type = \"FLOAT32\" }\n";
-  const CliResult s = run({"sweep", "--config", site, "--db", db, "--window", "1h"});
+  const CliResult s = run_import({"sweep", "--config", site, "--db", db, "--window", "1h"});
   INFO(s.out);
   CHECK(s.status == 0);
   CHECK(has(line_with(s.out, "runs_2 "), "error"));
@@ -346,9 +346,10 @@ TEST_CASE("a .mat loop and a recording obey --max-rows and the 1e12 bound as a C
 }
 
 TEST_CASE("an OP spike below 1e12 in a CSV file: the verdict names the sample") {
-  const std::string csv = tmp("spike.csv"), spiked = tmp("spiked.csv");
-  REQUIRE(run({"simulate", "--scenario", "paper-ex1-linear", "--samples", "600", "--out", csv})
-              .status == 0);
+  const std::string csv = import_tmp("spike.csv"), spiked = import_tmp("spiked.csv");
+  REQUIRE(
+      run_import({"simulate", "--scenario", "paper-ex1-linear", "--samples", "600", "--out", csv})
+          .status == 0);
   std::ifstream in(csv);
   std::ofstream out(spiked);
   std::string line;
@@ -359,7 +360,7 @@ TEST_CASE("an OP spike below 1e12 in a CSV file: the verdict names the sample") 
     out << line << "\n";
   }
   out.close();
-  const CliResult r = run({"diagnose", spiked, "--no-history"});
+  const CliResult r = run_import({"diagnose", spiked, "--no-history"});
   INFO(r.out);
   CHECK(r.status == 0);
   CHECK(has(line_with(r.out, "verdict:"),

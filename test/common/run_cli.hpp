@@ -101,4 +101,11 @@ inline CliResult run_cli(const std::string& bin, const std::vector<std::string>&
   return {st, ss.str()};
 }
 
+// The arguments `a` followed by `b`.
+inline std::vector<std::string> with(std::vector<std::string> a,
+                                     const std::vector<std::string>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
 }  // namespace valvediag::test

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "../common/sanitized.hpp"
+#include "../common/text.hpp"
 #include "valvediag/diagnose/valve_travel.hpp"
 #include "valvediag/diagnose/verdict.hpp"
 #include "valvediag/sim/scenarios.hpp"
@@ -32,9 +33,7 @@ std::vector<double> transmitted(std::vector<double> x, double noise, double step
   return x;
 }
 
-bool has(const std::string& s, const char* part) {
-  return s.find(part) != std::string::npos;
-}
+using valvediag::test::has;
 
 }  // namespace
 

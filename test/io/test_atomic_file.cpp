@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "../common/text.hpp"
 #include "valvediag/io/atomic_file.hpp"
 
 namespace fs = std::filesystem;
@@ -25,12 +26,7 @@ fs::path folder(const std::string& name) {
   return dir;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using valvediag::test::slurp;
 
 std::size_t entries(const fs::path& dir) {
   std::size_t n = 0;

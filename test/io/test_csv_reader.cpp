@@ -12,6 +12,7 @@
 #include <string>
 #include <thread>
 
+#include "csv_text.hpp"
 #include "valvediag/io/csv_reader.hpp"
 #include "valvediag/io/data_error.hpp"
 
@@ -24,10 +25,7 @@ using valvediag::read_loop_csv;
 
 namespace {
 
-LoopData parse(const std::string& text, const CsvOptions& o = {},
-               std::vector<std::string>* notes = nullptr) {
-  return parse_loop_csv(text, o, "data.csv", notes);
-}
+using valvediag::test::parse;
 
 // The DataError that parsing `text` must raise; fails the test when none is raised.
 DataError parse_error(const std::string& text, const CsvOptions& o = {}) {

@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "../common/text.hpp"
+#include "csv_text.hpp"
 #include "valvediag/io/csv_reader.hpp"
 #include "valvediag/io/data_error.hpp"
 
@@ -20,9 +22,7 @@ CsvOptions auto_format() {
   return o;
 }
 
-LoopData parse(const std::string& text, const CsvOptions& o, std::vector<std::string>* notes) {
-  return valvediag::parse_loop_csv(text, o, "data.csv", notes);
-}
+using valvediag::test::parse;
 
 std::string error_of(const std::string& text, const CsvOptions& o) {
   try {
@@ -34,9 +34,7 @@ std::string error_of(const std::string& text, const CsvOptions& o) {
   return "";
 }
 
-bool has(const std::string& s, const std::string& part) {
-  return s.find(part) != std::string::npos;
-}
+using valvediag::test::has;
 
 // A historian-like export: title lines, tag header, a units row, then `rows` rows a minute
 // apart from 10:00 (`stamp_format` takes the hour and the minute).

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/text.hpp"
 #include "mat_fixtures.hpp"
 #include "valvediag/io/data_error.hpp"
 #include "valvediag/io/mat_reader.hpp"
@@ -47,9 +48,7 @@ std::string error_of(F&& f) {
   return "";
 }
 
-bool has(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
-}
+using valvediag::test::has;
 
 void write_bytes(const std::string& path, const std::string& bytes) {
   std::ofstream(path, std::ios::binary) << bytes;

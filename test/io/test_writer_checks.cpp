@@ -8,6 +8,7 @@
 #include <sstream>
 #include <string>
 
+#include "../common/text.hpp"
 #include "valvediag/io/csv_reader.hpp"
 #include "valvediag/io/csv_writer.hpp"
 #include "valvediag/io/data_checks.hpp"
@@ -26,12 +27,7 @@ fs::path scratch(const std::string& name) {
   return dir / name;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using valvediag::test::slurp;
 
 LoopData sample_loop() {
   LoopData d;

@@ -26,7 +26,7 @@ using namespace valvediag;
 namespace fs = std::filesystem;
 
 namespace {
-const std::string kSimSite = std::string(VALVEDIAG_CONFIG_DIR) + "/sim-site.toml";
+const std::string kSimSiteToml = std::string(VALVEDIAG_CONFIG_DIR) + "/sim-site.toml";
 const fs::path kTmp = VALVEDIAG_TMP;
 
 using test::spawn;
@@ -57,17 +57,17 @@ std::string write_site(const std::string& name, int port, double period,
   return p.string();
 }
 
-double scalar(const std::string& db, const std::string& sql, std::string* text = nullptr) {
+double db_scalar(const std::string& db, const std::string& sql, std::string* text = nullptr) {
   return test::query_scalar(db, sql, text, false);
 }
 
-double wall_now() {
+double wall_seconds() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 }  // namespace
 
 TEST_CASE("kill -9 of the recorder: database intact, at most 1 s lost") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  SimPlc plc(load_site_config(kSimSiteToml), SimPlcOptions{10.0, 0});
   plc.start();
   const std::string site = write_site("kill9.toml", plc.port(), 0.05);
   const std::string db = fresh("kill9.sqlite");
@@ -75,40 +75,42 @@ TEST_CASE("kill -9 of the recorder: database intact, at most 1 s lost") {
       spawn({VALVEDIAG_BIN, "record", "--config", site, "--db", db, "--quiet", "--duration", "60s"},
             kTmp / "kill9.txt");
   // Wait (bounded) until it has committed a few transactions, then kill it mid-run.
-  REQUIRE(test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 30; }, 20.0));
+  REQUIRE(
+      test::wait_for([&] { return db_scalar(db, "SELECT count(*) FROM samples") >= 30; }, 20.0));
   std::this_thread::sleep_for(std::chrono::milliseconds(700));
-  const double killed_at = wall_now();
+  const double killed_at = wall_seconds();
   ::kill(pid, SIGKILL);
   int status = 0;
   ::waitpid(pid, &status, 0);
   CHECK(WIFSIGNALED(status));
   std::string integrity;
-  scalar(db, "PRAGMA integrity_check", &integrity);
+  db_scalar(db, "PRAGMA integrity_check", &integrity);
   CHECK(integrity == "ok");
-  const double last = scalar(db, "SELECT max(wall) FROM samples");
+  const double last = db_scalar(db, "SELECT max(wall) FROM samples");
   MESSAGE("kill -9 lost the last " << killed_at - last << " s");
   CHECK(killed_at - last <= 1.0);
   // No hole: every tick up to the last stored one has its row.
-  CHECK(scalar(db, "SELECT max(tick) + 1 - count(*) FROM samples") == 0);
+  CHECK(db_scalar(db, "SELECT max(tick) + 1 - count(*) FROM samples") == 0);
   CHECK(plc.write_requests() == 0);
 }
 
 TEST_CASE("two recorders: the second is refused; kill -9 leaves no block; the run is interrupted") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  SimPlc plc(load_site_config(kSimSiteToml), SimPlcOptions{10.0, 0});
   plc.start();
   const std::string site = write_site("two.toml", plc.port(), 0.05);
   const std::string db = fresh("two.sqlite");
   const pid_t first =
       spawn({VALVEDIAG_BIN, "record", "--config", site, "--db", db, "--quiet", "--duration", "60s"},
             kTmp / "two-first.txt");
-  REQUIRE(test::wait_for([&] { return scalar(db, "SELECT count(*) FROM samples") >= 10; }, 20.0));
+  REQUIRE(
+      test::wait_for([&] { return db_scalar(db, "SELECT count(*) FROM samples") >= 10; }, 20.0));
   Result r = run({"record", "--config", site, "--db", db, "--duration", "1s", "--quiet"}, 20.0);
   INFO(r.out);
   CHECK(r.status == 2);
   CHECK(r.out.find("error: " + db + " is being recorded by valvediag pid " + std::to_string(first) +
                    " on host ") != std::string::npos);
   CHECK(r.out.find("(run 1); a second recorder would poll the PLC twice") != std::string::npos);
-  CHECK(scalar(db, "SELECT count(*) FROM runs") == 1);  // the refused one began no run
+  CHECK(db_scalar(db, "SELECT count(*) FROM runs") == 1);  // the refused one began no run
   // While it records, a reader sees the run as being recorded.
   const fs::path csv = kTmp / "two.csv";
   r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string()});
@@ -120,7 +122,7 @@ TEST_CASE("two recorders: the second is refused; kill -9 leaves no block; the ru
   const std::string lock = fs::weakly_canonical(db).string() + ".lock";
   CHECK(fs::exists(lock));  // left by the killed recorder, locked by nobody
   std::string status;
-  scalar(db, "SELECT status FROM runs WHERE id = 1", &status);
+  db_scalar(db, "SELECT status FROM runs WHERE id = 1", &status);
   CHECK(status == "recording");
   r = run({"export", "--db", db, "--loop", "FIC101", "--out", csv.string()});
   CHECK(r.out.find("of run 1 (started ") != std::string::npos);
@@ -132,9 +134,9 @@ TEST_CASE("two recorders: the second is refused; kill -9 leaves no block; the ru
   CHECK(r.out.find("note: run 1 in " + db +
                    " was left 'recording' by a recorder that did not end "
                    "cleanly") != std::string::npos);
-  scalar(db, "SELECT status FROM runs WHERE id = 1", &status);
+  db_scalar(db, "SELECT status FROM runs WHERE id = 1", &status);
   CHECK(status == "interrupted");
-  scalar(db, "SELECT status FROM runs WHERE id = 2", &status);
+  db_scalar(db, "SELECT status FROM runs WHERE id = 2", &status);
   CHECK(status == "completed");
   CHECK(!fs::exists(lock));
 
@@ -157,7 +159,7 @@ TEST_CASE("two recorders: the second is refused; kill -9 leaves no block; the ru
 }
 
 TEST_CASE("a config error is reported with file and line before any bus traffic") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  SimPlc plc(load_site_config(kSimSiteToml), SimPlcOptions{10.0, 0});
   plc.start();
   const std::string site =
       write_site("bad.toml", plc.port(), 0.05, "mv = { register = \"coil\", address = 9 }\n");
@@ -170,7 +172,7 @@ TEST_CASE("a config error is reported with file and line before any bus traffic"
 }
 
 TEST_CASE("record on a database busy at its start says so and stores every sample once free") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{10.0, 0});
+  SimPlc plc(load_site_config(kSimSiteToml), SimPlcOptions{10.0, 0});
   plc.start();
   const std::string site = write_site("busy-start.toml", plc.port(), 0.05);
   const std::string db = fresh("busy-start.sqlite");
@@ -192,12 +194,12 @@ TEST_CASE("record on a database busy at its start says so and stores every sampl
         std::string::npos);
   CHECK(r.out.find("stored once it is free (up to 90 s)") != std::string::npos);
   CHECK(r.out.find("FIC101: 40 samples") != std::string::npos);
-  CHECK(scalar(db, "SELECT count(*) FROM samples") == 40);
-  CHECK(scalar(db, "SELECT min(tick) FROM samples") == 0);
+  CHECK(db_scalar(db, "SELECT count(*) FROM samples") == 40);
+  CHECK(db_scalar(db, "SELECT min(tick) FROM samples") == 0);
 }
 
 TEST_CASE("record exits 4 when errors happened, 0 when not; export and fit read the database") {
-  SimPlc plc(load_site_config(kSimSite), SimPlcOptions{100.0, 0});
+  SimPlc plc(load_site_config(kSimSiteToml), SimPlcOptions{100.0, 0});
   plc.start();
   // paper-ex1 at 100x: Ts 0.5 s becomes 5 ms; recorded at the same period.
   const std::string site = write_site("clean.toml", plc.port(), 0.005);
@@ -282,8 +284,8 @@ TEST_CASE("record against an unreachable PLC: the summary counts the failed conn
 TEST_CASE("sim-plc prints its free port, serves the recorder, and reports the function codes") {
   const fs::path out = kTmp / "simplc.txt";
   fs::remove(out);  // else the port of an earlier run may be read before the child truncates it
-  const pid_t pid = spawn({VALVEDIAG_BIN, "sim-plc", "--config", kSimSite, "--port", "0", "--speed",
-                           "10", "--duration", "4s"},
+  const pid_t pid = spawn({VALVEDIAG_BIN, "sim-plc", "--config", kSimSiteToml, "--port", "0",
+                           "--speed", "10", "--duration", "4s"},
                           out);
   int port = 0;
   REQUIRE(test::wait_for(
@@ -374,20 +376,21 @@ TEST_CASE("sim-plc serves CAN on a Unix socket; record reads it through interfac
   for (const char* loop : {"FIC101", "TIC205", "PIC301"}) {
     INFO(loop);
     const std::string id = "(SELECT id FROM loops WHERE name = '" + std::string(loop) + "')";
-    const double rows = scalar(db, "SELECT count(*) FROM samples WHERE loop_id = " + id);
-    const double good =
-        scalar(db, "SELECT count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 AND loop_id = " + id);
+    const double rows = db_scalar(db, "SELECT count(*) FROM samples WHERE loop_id = " + id);
+    const double good = db_scalar(
+        db, "SELECT count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 AND loop_id = " + id);
     CHECK(rows >= 20);
     CHECK(good >= rows / 2);  // all of them on a quiet machine
     // Plausible: OP within 0..100 %, PV near the loops' operating point 50.
-    CHECK(scalar(db, "SELECT count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 AND loop_id = " +
-                         id + " AND (op < 0 OR op > 100 OR abs(pv - 50) > 25)") == 0);
-    CHECK(scalar(db, "SELECT count(DISTINCT pv) FROM samples WHERE q_pv = 0 AND loop_id = " + id) >=
+    CHECK(db_scalar(db, "SELECT count(*) FROM samples WHERE q_op = 0 AND q_pv = 0 AND loop_id = " +
+                            id + " AND (op < 0 OR op > 100 OR abs(pv - 50) > 25)") == 0);
+    CHECK(db_scalar(db,
+                    "SELECT count(DISTINCT pv) FROM samples WHERE q_pv = 0 AND loop_id = " + id) >=
           3);  // the values move: it is the simulation, not one frame over and over
   }
-  CHECK(scalar(db,
-               "SELECT count(*) FROM samples WHERE q_sp = 0 AND abs(sp - 50) < 10 AND "
-               "loop_id = (SELECT id FROM loops WHERE name = 'FIC101')") >= 20);
+  CHECK(db_scalar(db,
+                  "SELECT count(*) FROM samples WHERE q_sp = 0 AND abs(sp - 50) < 10 AND "
+                  "loop_id = (SELECT id FROM loops WHERE name = 'FIC101')") >= 20);
 
   CHECK(wait_child(pid, 20.0) == 0);
   std::ifstream f(out);
@@ -470,7 +473,7 @@ TEST_CASE(
                    "linear interpolation") != std::string::npos);
   CHECK(r.out.find("1200 samples") != std::string::npos);
   // The model is kept under that reading: ladder finds it with the same option, and only then.
-  CHECK(scalar(db, "SELECT COUNT(*) FROM model_history WHERE reading = '--bridge-gaps 2'") == 1);
+  CHECK(db_scalar(db, "SELECT COUNT(*) FROM model_history WHERE reading = '--bridge-gaps 2'") == 1);
   r = run({"ladder", "--db", db, "--loop", "FIC101", "--bridge-gaps", "2"});
   CHECK(r.status == 0);
   CHECK(r.out.find("preisach") != std::string::npos);  // fit's default model

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "../common/run_cli.hpp"
+#include "../common/text.hpp"
 #include "page_checks.hpp"
 
 namespace fs = std::filesystem;
@@ -33,12 +34,7 @@ constexpr double kBrowserLimitS = 60.0;
 
 const fs::path kTmp = VALVEDIAG_TMP;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+using valvediag::test::slurp;
 
 valvediag::test::CliResult valvediag_cli(const std::vector<std::string>& args) {
   return valvediag::test::run_cli(VALVEDIAG_BIN, args, kTmp, 120.0);

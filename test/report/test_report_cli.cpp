@@ -10,6 +10,7 @@
 #include <string>
 
 #include "../common/sanitized.hpp"
+#include "../common/text.hpp"
 #include "page_checks.hpp"
 
 using report_test::check_self_contained;
@@ -41,12 +42,7 @@ std::string tmp(const std::string& name) {
   return std::string(VALVEDIAG_TMP) + "/" + name;
 }
 
-std::string slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+using valvediag::test::slurp;
 
 // A sticky loop (the paper's Example 1, 1500 samples) with no model history yet in the file that
 // --history CSV.history.json names.

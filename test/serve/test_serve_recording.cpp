@@ -32,11 +32,11 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-const fs::path kTmp = VALVEDIAG_TMP;
+const fs::path kRecTmp = VALVEDIAG_TMP;
 const std::string kSimSite = std::string(VALVEDIAG_CONFIG_DIR) + "/sim-site.toml";
 
 std::string fresh(const std::string& name) {
-  const fs::path p = kTmp / name;
+  const fs::path p = kRecTmp / name;
   for (const char* suffix : {"", "-wal", "-shm", ".lock"}) fs::remove(p.string() + suffix);
   return p.string();
 }
@@ -44,7 +44,7 @@ std::string fresh(const std::string& name) {
 // A site of the PLC on `port`: FIC101 (paper Example 1, He stiction) every 5 ms and LIC201
 // (deadband) every 10 ms: the simulated 0.5 s and 1 s at 100 times real time.
 std::string write_site(const std::string& name, int port) {
-  const fs::path p = kTmp / name;
+  const fs::path p = kRecTmp / name;
   std::ofstream f(p);
   f << "[[bus]]\nname = \"plc\"\nprotocol = \"modbus-tcp\"\ncontroller = \"tcp://127.0.0.1:" << port
     << "\"\ntimeout = \"100ms\"\nretries = 0\nreconnect_max = \"500ms\"\n"
@@ -63,10 +63,10 @@ double scalar(const std::string& db, const std::string& sql, std::string* text =
   return valvediag::test::query_scalar(db, sql, text);
 }
 
-struct Server : valvediag::test::ServeProcess {
-  Server(std::vector<std::string> args, const std::string& tag,
-         const std::vector<std::string>& env = {})
-      : ServeProcess(VALVEDIAG_BIN, with_serve(std::move(args)), kTmp, tag, 60.0, env) {}
+struct RecordingServer : valvediag::test::ServeProcess {
+  RecordingServer(std::vector<std::string> args, const std::string& tag,
+                  const std::vector<std::string>& env = {})
+      : ServeProcess(VALVEDIAG_BIN, with_serve(std::move(args)), kRecTmp, tag, 60.0, env) {}
   static std::vector<std::string> with_serve(std::vector<std::string> args) {
     args.insert(args.begin(), "serve");
     return args;
@@ -82,7 +82,7 @@ json get(httplib::Client& c, const std::string& path) {
 }
 
 // Posts a job and waits (bounded) for it to finish.
-json run_job(httplib::Client& c, const json& job, std::size_t loop = 0) {
+json run_recording_job(httplib::Client& c, const json& job, std::size_t loop = 0) {
   const auto r =
       c.Post("/api/loops/" + std::to_string(loop) + "/jobs", job.dump(), "application/json");
   REQUIRE(r);
@@ -104,7 +104,7 @@ std::string recording(valvediag::SimPlc& plc) {
     const auto r = run_cli(VALVEDIAG_BIN,
                            {"record", "--config", write_site("serve_rec.toml", plc.port()), "--db",
                             path, "--duration", "3s", "--quiet"},
-                           kTmp, 60.0);
+                           kRecTmp, 60.0);
     INFO(r.out);
     REQUIRE((r.status == 0 || r.status == 4));  // 4: a tick missed on a loaded machine
     return path;
@@ -143,11 +143,11 @@ TEST_CASE("serve --db: the recorded loops, their models in the recording's model
   const std::string db = recording(plc);
   const std::string rows = recorded_rows(db);
   REQUIRE(rows.size() > 10000);
-  const fs::path state = kTmp / ("serve_rec_state_" + std::to_string(::getpid()));
+  const fs::path state = kRecTmp / ("serve_rec_state_" + std::to_string(::getpid()));
   fs::remove_all(state);
   const std::vector<std::string> env{"XDG_STATE_HOME=" + state.string()};
   {
-    Server s({"--db", db, "--port", "0"}, "rec_db", env);
+    RecordingServer s({"--db", db, "--port", "0"}, "rec_db", env);
     auto c = s.client();
     const json loops = get(c, "/api/loops")["loops"];
     REQUIRE(loops.size() == 2);
@@ -179,11 +179,12 @@ TEST_CASE("serve --db: the recorded loops, their models in the recording's model
     const json series = get(c, "/api/loops/0/series?buckets=3");
     CHECK(series["samples"] == loops[0]["samples"]);
     CHECK(series["op"]["max"].size() == 3);
-    const json fit = run_job(c, {{"action", "fit"}, {"model", "linear"}});
+    const json fit = run_recording_job(c, {{"action", "fit"}, {"model", "linear"}});
     REQUIRE_MESSAGE(fit["state"] == "done", fit.dump());
     CHECK(fit["result"]["history"]["entries"] == 1);
     CHECK(fit["result"]["history"]["where"] == db + " (table model_history)");
-    const json add = run_job(c, {{"action", "add"}, {"effect", "stiction"}, {"validate", 0.4}});
+    const json add =
+        run_recording_job(c, {{"action", "add"}, {"effect", "stiction"}, {"validate", 0.4}});
     REQUIRE_MESSAGE(add["state"] == "done", add.dump());
     CHECK(add["result"]["history"]["entries"] == 2);
     CHECK(add["result"]["data"]["validate"] == 0.4);
@@ -203,7 +204,7 @@ TEST_CASE("serve --db: the recorded loops, their models in the recording's model
       std::vector<std::string> args;
       std::istringstream words(cmd.substr(std::string("valvediag ").size()));
       for (std::string w; words >> w;) args.push_back(w);
-      const auto lad = run_cli(VALVEDIAG_BIN, args, kTmp, 60.0, env);
+      const auto lad = run_cli(VALVEDIAG_BIN, args, kRecTmp, 60.0, env);
       INFO(lad.out);
       CHECK(lad.status == 0);
       CHECK(lad.out.find("linear") != std::string::npos);
@@ -219,8 +220,9 @@ TEST_CASE("serve --db: the recorded loops, their models in the recording's model
   // --no-history and --loops: one loop, and not a byte of the file changed.
   const std::string bytes = slurp(db);
   {
-    Server s({"--db", db, "--port", "0", "--loops", "LIC*", "--window", "1s", "--no-history"},
-             "rec_db_nohist", env);
+    RecordingServer s(
+        {"--db", db, "--port", "0", "--loops", "LIC*", "--window", "1s", "--no-history"},
+        "rec_db_nohist", env);
     auto c = s.client();
     const json loops = get(c, "/api/loops")["loops"];
     REQUIRE(loops.size() == 1);
@@ -228,7 +230,7 @@ TEST_CASE("serve --db: the recorded loops, their models in the recording's model
     // The latest second: 100 samples at 10 ms (the window's ends on ticks).
     CHECK(loops[0]["samples"].get<int>() >= 99);
     CHECK(loops[0]["samples"].get<int>() <= 101);
-    const json fit = run_job(c, {{"action", "fit"}, {"model", "linear"}});
+    const json fit = run_recording_job(c, {{"action", "fit"}, {"model", "linear"}});
     CHECK(fit["state"] == "failed");  // 100 samples: too few to fit, and said so
     CHECK(fit["error"].get<std::string>().find("200") != std::string::npos);
     CHECK(s.stop() == 0);
@@ -244,14 +246,14 @@ TEST_CASE("serve --db: a missing file, not a recording, no loop matching, an emp
   const auto serve = [](const std::vector<std::string>& args) {
     std::vector<std::string> full{"serve", "--port", "0"};
     full.insert(full.end(), args.begin(), args.end());
-    return run_cli(VALVEDIAG_BIN, full, kTmp, 60.0);
+    return run_cli(VALVEDIAG_BIN, full, kRecTmp, 60.0);
   };
-  const std::string missing = (kTmp / "no-such.sqlite").string();
+  const std::string missing = (kRecTmp / "no-such.sqlite").string();
   auto r = serve({"--db", missing});
   CHECK(r.status == 2);
   CHECK(r.out.find(missing + ": no such database") != std::string::npos);
   CHECK(!fs::exists(missing));  // not created
-  const fs::path junk = kTmp / "serve_junk.sqlite";
+  const fs::path junk = kRecTmp / "serve_junk.sqlite";
   std::ofstream(junk) << "t,op,pv\n0,1,2\n";
   r = serve({"--db", junk.string()});
   CHECK(r.status == 2);
@@ -281,7 +283,7 @@ TEST_CASE("serve --db: a missing file, not a recording, no loop matching, an emp
   const auto rec = run_cli(VALVEDIAG_BIN,
                            {"record", "--config", write_site("serve_dead.toml", 1), "--db", dead,
                             "--duration", "0.5s", "--quiet"},
-                           kTmp, 60.0);
+                           kRecTmp, 60.0);
   REQUIRE_MESSAGE(rec.status == 4, rec.out);
   r = serve({"--db", dead});
   CHECK(r.status == 2);
@@ -297,10 +299,10 @@ TEST_CASE(
   plc.start();
   const std::string site = write_site("serve_live.toml", plc.port());
   const std::string db = fresh("serve_live.sqlite");
-  const fs::path state = kTmp / ("serve_live_state_" + std::to_string(::getpid()));
+  const fs::path state = kRecTmp / ("serve_live_state_" + std::to_string(::getpid()));
   fs::remove_all(state);
   const std::vector<std::string> env{"XDG_STATE_HOME=" + state.string()};
-  Server s({"--config", site, "--db", db, "--port", "0"}, "live", env);
+  RecordingServer s({"--config", site, "--db", db, "--port", "0"}, "live", env);
   auto c = s.client();
   const auto samples = [&](std::size_t loop) {
     return get(c, "/api/loops")["loops"][loop]["samples"].get<int>();
@@ -336,7 +338,7 @@ TEST_CASE(
   CHECK(st["loops"][0]["rows"].get<int>() > 400);
   // "Fit the last second": 201 samples of 5 ms, the latest when the job started.
   const int before = samples(0);
-  const json fit = run_job(c, {{"action", "fit"}, {"model", "linear"}, {"last_s", 1.0}});
+  const json fit = run_recording_job(c, {{"action", "fit"}, {"model", "linear"}, {"last_s", 1.0}});
   REQUIRE_MESSAGE(fit["state"] == "done", fit.dump());
   const json& data = fit["result"]["data"];
   CHECK(data["samples"] == 201);

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <vector>
 
+#include "input_path.hpp"
 #include "valvediag/core/preisach.hpp"
 #include "valvediag/sim/valve_effects.hpp"
 
@@ -13,15 +14,7 @@ using namespace valvediag;
 
 namespace {
 
-std::vector<double> path(const std::vector<double>& turns, double du) {
-  std::vector<double> u{turns.front()};
-  for (std::size_t i = 1; i < turns.size(); ++i) {
-    const double a = turns[i - 1], b = turns[i];
-    const int n = static_cast<int>(std::ceil(std::abs(b - a) / du));
-    for (int k = 1; k <= n; ++k) u.push_back(a + (b - a) * k / n);
-  }
-  return u;
-}
+using valvediag::test::path;
 
 struct Mismatch {
   double max = 0.0, mean = 0.0, fraction = 0.0;  // fraction of samples off by more than 0.5

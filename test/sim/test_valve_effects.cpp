@@ -5,22 +5,14 @@
 #include <stdexcept>
 #include <vector>
 
+#include "input_path.hpp"
 #include "valvediag/sim/valve_effects.hpp"
 
 using namespace valvediag;
 
 namespace {
 
-// Piecewise-linear input through the given turning points in steps of at most du.
-std::vector<double> path(const std::vector<double>& turns, double du) {
-  std::vector<double> u{turns.front()};
-  for (std::size_t i = 1; i < turns.size(); ++i) {
-    const double a = turns[i - 1], b = turns[i];
-    const int n = static_cast<int>(std::ceil(std::abs(b - a) / du));
-    for (int k = 1; k <= n; ++k) u.push_back(a + (b - a) * k / n);
-  }
-  return u;
-}
+using valvediag::test::path;
 
 template <class Block>
 std::vector<double> run(Block& b, const std::vector<double>& u) {

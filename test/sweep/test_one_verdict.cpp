@@ -25,18 +25,18 @@ using namespace valvediag;
 namespace fs = std::filesystem;
 
 namespace {
-const fs::path kTmp = VALVEDIAG_TMP;
+const fs::path kVerdictTmp = VALVEDIAG_TMP;
 
-test::CliResult run(const std::vector<std::string>& args) {
-  return test::run_cli(VALVEDIAG_BIN, args, kTmp, 240.0);
+test::CliResult run_verdict(const std::vector<std::string>& args) {
+  return test::run_cli(VALVEDIAG_BIN, args, kVerdictTmp, 240.0);
 }
 
-nlohmann::json read_json(const std::string& path) {
+nlohmann::json load_json(const std::string& path) {
   std::ifstream f(path);
   return nlohmann::json::parse(f);
 }
 
-std::string read_text(const std::string& path) {
+std::string load_text(const std::string& path) {
   std::ifstream f(path);
   REQUIRE(f);
   return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
@@ -62,9 +62,9 @@ std::string page_verdict(const std::string& html) {
 
 // A simulated record of 2000 samples with no model history.
 std::string simulated(const std::string& scenario, int seed) {
-  const std::string csv = (kTmp / ("one-" + scenario + ".csv")).string();
-  const test::CliResult s = run({"simulate", "--scenario", scenario, "--seed", std::to_string(seed),
-                                 "--samples", "2000", "--out", csv});
+  const std::string csv = (kVerdictTmp / ("one-" + scenario + ".csv")).string();
+  const test::CliResult s = run_verdict({"simulate", "--scenario", scenario, "--seed",
+                                         std::to_string(seed), "--samples", "2000", "--out", csv});
   REQUIRE(s.status == 0);
   fs::remove(csv + ".history.json");
   return csv;
@@ -82,13 +82,13 @@ bool same_size(const nlohmann::json& a, const nlohmann::json& b, const char* key
 // Every command on each of `files` gives the sweep's verdict; `sticky` is the one He's valve of
 // 8.4 % hides in.
 void check_agreement(const std::vector<std::string>& files, const std::string& sticky) {
-  const std::string sj = (kTmp / "one-sweep.json").string();
+  const std::string sj = (kVerdictTmp / "one-sweep.json").string();
   std::vector<std::string> sweep{"sweep", "--jobs", "2", "--quiet", "--json", sj};
   sweep.insert(sweep.end(), files.begin(), files.end());
-  const test::CliResult sw = run(sweep);
+  const test::CliResult sw = run_verdict(sweep);
   INFO(sw.out);
   REQUIRE(sw.status == 0);
-  const nlohmann::json swept = read_json(sj);
+  const nlohmann::json swept = load_json(sj);
 
   for (const std::string& csv : files) {
     CAPTURE(csv);
@@ -99,8 +99,8 @@ void check_agreement(const std::vector<std::string>& files, const std::string& s
     const std::string v = (*loop)["verdict"];
     if (csv == sticky) CHECK(v == "stiction");
 
-    const std::string dj = (kTmp / "one-diag.json").string();
-    const test::CliResult one = run({"diagnose", csv, "--no-history", "--json", dj});
+    const std::string dj = (kVerdictTmp / "one-diag.json").string();
+    const test::CliResult one = run_verdict({"diagnose", csv, "--no-history", "--json", dj});
     INFO(one.out);
     REQUIRE(one.status == 0);
     CHECK(verdict_line(one.out) == v);
@@ -108,40 +108,42 @@ void check_agreement(const std::vector<std::string>& files, const std::string& s
     CHECK(one.out.find("The loop's verdict rests on `diagnose --auto` from `linear`, as a sweep "
                        "runs it, which ends at `" +
                        (*loop)["model"].get<std::string>() + "`.") != std::string::npos);
-    const nlohmann::json dg = read_json(dj);
+    const nlohmann::json dg = load_json(dj);
     CHECK(dg["model"] == "linear");
     CHECK(dg["verdict"] == v);
     CHECK(dg["verdict_model"] == (*loop)["model"]);
     CHECK(same_size(dg, *loop, "stiction_percent"));
     CHECK(same_size(dg, *loop, "stiction_lo_percent"));
 
-    const std::string aj = (kTmp / "one-auto.json").string();
-    const test::CliResult climb = run({"diagnose", csv, "--auto", "--no-history", "--json", aj});
+    const std::string aj = (kVerdictTmp / "one-auto.json").string();
+    const test::CliResult climb =
+        run_verdict({"diagnose", csv, "--auto", "--no-history", "--json", aj});
     INFO(climb.out);
     REQUIRE(climb.status == 0);
     CHECK(verdict_line(climb.out) == v);
     CHECK(climb.out.find("The loop's verdict rests on") == std::string::npos);  // it is this one
-    const nlohmann::json au = read_json(aj);
+    const nlohmann::json au = load_json(aj);
     CHECK(au["verdict"] == v);
     CHECK(au["model"] == (*loop)["model"]);
 
-    const std::string page = (kTmp / "one-report.html").string();
-    const test::CliResult rep = run({"report", csv, "--no-plots", "--no-history", "--out", page});
+    const std::string page = (kVerdictTmp / "one-report.html").string();
+    const test::CliResult rep =
+        run_verdict({"report", csv, "--no-plots", "--no-history", "--out", page});
     INFO(rep.out);
     REQUIRE(rep.status == 0);
     // The page shows the model the verdict rests on: the sweep's.
     CHECK(rep.out.find("note: model " + (*loop)["model"].get<std::string>() +
                        " (the model the verdict rests on") != std::string::npos);
     CHECK(verdict_line(rep.out) == v);
-    CHECK(page_verdict(read_text(page)) == v);
+    CHECK(page_verdict(load_text(page)) == v);
 
-    const std::string fj = (kTmp / "one-fit.json").string();
+    const std::string fj = (kVerdictTmp / "one-fit.json").string();
     const test::CliResult fit =
-        run({"fit", csv, "--model", "linear", "--verdict", "--no-history", "--json", fj});
+        run_verdict({"fit", csv, "--model", "linear", "--verdict", "--no-history", "--json", fj});
     INFO(fit.out);
     REQUIRE(fit.status == 0);
     CHECK(verdict_line(fit.out) == v);
-    const nlohmann::json fd = read_json(fj);
+    const nlohmann::json fd = load_json(fj);
     CHECK(fd["model"] == "linear");
     CHECK(fd["verdict"] == v);
     CHECK(same_size(fd, *loop, "stiction_percent"));
@@ -150,8 +152,8 @@ void check_agreement(const std::vector<std::string>& files, const std::string& s
       CHECK(one.out.find("stiction:  8.") != std::string::npos);
     } else {
       // A model with stiction shown (on a few candidates): the verdict is still the loop's.
-      const test::CliResult st =
-          run({"diagnose", csv, "--model", "stiction", "--candidates", "delay", "--no-history"});
+      const test::CliResult st = run_verdict(
+          {"diagnose", csv, "--model", "stiction", "--candidates", "delay", "--no-history"});
       INFO(st.out);
       REQUIRE(st.status == 0);
       CHECK(st.out.find("model:     stiction (") != std::string::npos);
@@ -179,17 +181,17 @@ TEST_CASE("one verdict: on a sticky loop too, with its size" * valvediag::test::
 TEST_CASE("one verdict: a model history on disk does not change report's verdict" *
           valvediag::test::release_only()) {
   const std::string csv = simulated("characteristic", 1);
-  const std::string page = (kTmp / "one-history.html").string();
+  const std::string page = (kVerdictTmp / "one-history.html").string();
   const std::string hist = csv + ".history.json";  // --history: a fresh ladder every run
   fs::remove(hist);
   auto report = [&](const std::string& model_note) {
     // --no-history: the report reads the history, it does not add to it here.
-    const test::CliResult r =
-        run({"report", csv, "--no-plots", "--history", hist, "--no-history", "--out", page});
+    const test::CliResult r = run_verdict(
+        {"report", csv, "--no-plots", "--history", hist, "--no-history", "--out", page});
     INFO(r.out);
     REQUIRE(r.status == 0);
     CHECK(r.out.find(model_note) != std::string::npos);
-    CHECK(page_verdict(read_text(page)) == verdict_line(r.out));
+    CHECK(page_verdict(load_text(page)) == verdict_line(r.out));
     return verdict_line(r.out);
   };
   // Whatever the history holds, the page shows the model the verdict rests on.
@@ -198,18 +200,18 @@ TEST_CASE("one verdict: a model history on disk does not change report's verdict
   REQUIRE(!first.empty());
   REQUIRE(!fs::exists(hist));
 
-  const test::CliResult fit = run({"fit", csv, "--model", "preisach", "--history", hist});
+  const test::CliResult fit = run_verdict({"fit", csv, "--model", "preisach", "--history", hist});
   REQUIRE(fit.status == 0);
   REQUIRE(fs::exists(hist));
   CHECK(report(shown) == first);
 
-  const test::CliResult climb = run({"diagnose", csv, "--auto", "--history", hist});
+  const test::CliResult climb = run_verdict({"diagnose", csv, "--auto", "--history", hist});
   INFO(climb.out);
   REQUIRE(climb.status == 0);
-  const std::string top = read_json(hist)["entries"].back()["model"];
+  const std::string top = load_json(hist)["entries"].back()["model"];
   CHECK(report("note: model " + top + shown) == first);
   // That model is where the verdict's climb ended: the page shows that climb, not a rerun.
-  CHECK(read_text(page).find("valvediag diagnose " + csv + " --auto") != std::string::npos);
+  CHECK(load_text(page).find("valvediag diagnose " + csv + " --auto") != std::string::npos);
   CHECK(verdict_line(climb.out) == first);
 }
 
