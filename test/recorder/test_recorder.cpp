@@ -631,9 +631,10 @@ TEST_CASE_FIXTURE(SimRig,
     CHECK(scalar(db, "SELECT count(*)" + in_run) == 120);
     CHECK(scalar(db, "SELECT min(tick)" + in_run) == 0);  // from the first tick
     // Polled on time from the first tick: the database's set-up (here its busy timeout) does not
-    // hold the polls back, so no tick is marked missed.
-    CHECK(s.missed == 0);
-    CHECK(scalar(db, "SELECT count(*)" + in_run + " AND q_op = 3") == 0);
+    // hold the polls back. Held back by the 4 s lock, some 80 ticks of 50 ms would be marked
+    // missed; a loaded machine (ctest -j2 beside the diagnoses) has missed one.
+    CHECK(s.missed <= 2);
+    CHECK(scalar(db, "SELECT count(*)" + in_run + " AND q_op = 3") == s.missed);
     CHECK(scalar(db, "SELECT max(tick) + 1 - count(*)" + in_run) == 0);
     CHECK(scalar(db, "SELECT count(*) FROM runs WHERE status = 'completed' AND id = " + run) == 1);
     // The run started when the recorder did, not when the lock was released.
