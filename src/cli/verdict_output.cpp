@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "valvediag/report/json_number.hpp"
 #include "valvediag/report/sweep_report.hpp"
 #include "valvediag/util/text_stats.hpp"
 
@@ -70,17 +71,16 @@ std::string verdict_text(const LoopVerdict& v, bool basis) {
 }
 
 void add_verdict_json(nlohmann::json& j, const LoopVerdict& v) {
-  auto number = [](double x) { return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json(); };
   j["verdict"] = v.verdict;
   j["verdict_reason"] = v.verdict == "error" ? v.error : v.reason;
   j["verdict_model"] = v.model;
-  j["stiction_percent"] = number(v.stiction.band_percent);
-  j["slip_jump_percent"] = number(v.stiction.jump_percent);
-  j["stiction_lo_percent"] = number(v.stiction.band_lo_percent);
-  j["stiction_hi_percent"] = number(v.stiction.band_hi_percent);
+  j["stiction_percent"] = json_number(v.stiction.band_percent);
+  j["slip_jump_percent"] = json_number(v.stiction.jump_percent);
+  j["stiction_lo_percent"] = json_number(v.stiction.band_lo_percent);
+  j["stiction_hi_percent"] = json_number(v.stiction.band_hi_percent);
   j["stiction_hi_open"] = v.stiction.band_hi_open;
-  j["prediction_stiction_percent"] = number(v.stiction.prediction_band_percent);
-  j["prediction_slip_jump_percent"] = number(v.stiction.prediction_jump_percent);
+  j["prediction_stiction_percent"] = json_number(v.stiction.prediction_band_percent);
+  j["prediction_slip_jump_percent"] = json_number(v.stiction.prediction_jump_percent);
   j["split_check"] = split_check_json(v.split_verdicts);
 }
 

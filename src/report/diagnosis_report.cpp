@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "number_format.hpp"
+#include "valvediag/report/json_number.hpp"
 #include "valvediag/util/text_stats.hpp"
 
 namespace valvediag {
@@ -20,10 +21,6 @@ std::string signed_num(double v) {
 
 double t_at(const std::vector<double>& t, std::size_t k) {
   return k < t.size() ? t[k] : static_cast<double>(k);
-}
-
-nlohmann::json num_json(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
 }
 
 }  // namespace
@@ -126,12 +123,12 @@ std::string format_diagnosis(const Diagnosis& d, const std::vector<double>& t,
 
 nlohmann::json limit_cycle_json(const LimitCycle& c) {
   return {{"oscillating", c.oscillating},
-          {"period_s", num_json(c.oscillating ? c.period_s : LimitCycle::kNaN)},
-          {"phase_deg", num_json(c.phase_deg)},
-          {"model_share", num_json(c.model_share)},
+          {"period_s", json_number(c.oscillating ? c.period_s : LimitCycle::kNaN)},
+          {"phase_deg", json_number(c.phase_deg)},
+          {"model_share", json_number(c.model_share)},
           {"integrating", c.integrating},
           {"stick_slip", c.stick_slip},
-          {"apparent_band", num_json(c.apparent_band)},
+          {"apparent_band", json_number(c.apparent_band)},
           {"summary", c.summary}};
 }
 
@@ -156,14 +153,14 @@ nlohmann::json whole_record_json(const WholeRecordTest& w) {
   return {{"tested", w.tested},
           {"confirmed", w.confirmed},
           {"memory_model", w.memory_model},
-          {"start_fitness_percent", num_json(w.start_fitness)},
-          {"memory_fitness_percent", num_json(w.memory_fitness)},
-          {"relative_gain", num_json(w.relative_gain)},
-          {"load_fitness_percent", num_json(w.load_fitness)},
-          {"load_bic_margin", num_json(w.load_bic_margin)},
+          {"start_fitness_percent", json_number(w.start_fitness)},
+          {"memory_fitness_percent", json_number(w.memory_fitness)},
+          {"relative_gain", json_number(w.relative_gain)},
+          {"load_fitness_percent", json_number(w.load_fitness)},
+          {"load_bic_margin", json_number(w.load_bic_margin)},
           {"rival", w.rival},
-          {"rival_fitness_percent", num_json(w.rival_fitness)},
-          {"rival_bic_margin", num_json(w.rival_bic_margin)},
+          {"rival_fitness_percent", json_number(w.rival_fitness)},
+          {"rival_bic_margin", json_number(w.rival_bic_margin)},
           {"preferred", w.preferred},
           {"summary", w.summary}};
 }
@@ -191,22 +188,23 @@ WholeRecordTest whole_record_from_json(const nlohmann::json& j) {
 }
 
 nlohmann::json valve_travel_json(const ValveTravel& v) {
-  return {{"tested", v.tested},
-          {"decided", v.decided},
-          {"verdict", v.verdict},
-          {"fs_percent", num_json(v.fs_percent)},
-          {"fd_percent", num_json(v.fd_percent)},
-          {"slip_jump_percent", num_json(v.jump_percent)},
-          {"lag_s", num_json(v.lag_s)},
-          {"gain", num_json(v.gain)},
-          {"mv_noise", num_json(v.mv_noise)},
-          {"follow_fitness_percent", num_json(v.follow_fitness_percent)},
-          {"follow_validation_fitness_percent", num_json(v.follow_validation_fitness_percent)},
-          {"friction_fitness_percent", num_json(v.friction_fitness_percent)},
-          {"friction_validation_fitness_percent", num_json(v.friction_validation_fitness_percent)},
-          {"error_share", num_json(v.error_share)},
-          {"validation_error_share", num_json(v.validation_error_share)},
-          {"summary", v.summary}};
+  return {
+      {"tested", v.tested},
+      {"decided", v.decided},
+      {"verdict", v.verdict},
+      {"fs_percent", json_number(v.fs_percent)},
+      {"fd_percent", json_number(v.fd_percent)},
+      {"slip_jump_percent", json_number(v.jump_percent)},
+      {"lag_s", json_number(v.lag_s)},
+      {"gain", json_number(v.gain)},
+      {"mv_noise", json_number(v.mv_noise)},
+      {"follow_fitness_percent", json_number(v.follow_fitness_percent)},
+      {"follow_validation_fitness_percent", json_number(v.follow_validation_fitness_percent)},
+      {"friction_fitness_percent", json_number(v.friction_fitness_percent)},
+      {"friction_validation_fitness_percent", json_number(v.friction_validation_fitness_percent)},
+      {"error_share", json_number(v.error_share)},
+      {"validation_error_share", json_number(v.validation_error_share)},
+      {"summary", v.summary}};
 }
 
 ValveTravel valve_travel_from_json(const nlohmann::json& j) {
@@ -240,8 +238,8 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
   const auto& s = d.last();
   json j;
   j["model"] = to_string(s.fit.spec);
-  j["fitness_percent"] = num_json(s.fit.fitness_percent);
-  j["validation_fitness_percent"] = num_json(s.fit.validation_fitness_percent);
+  j["fitness_percent"] = json_number(s.fit.fitness_percent);
+  j["validation_fitness_percent"] = json_number(s.fit.validation_fitness_percent);
   j["structure"] = {
       {"na", s.fit.structure.na}, {"nb", s.fit.structure.nb}, {"nk", s.fit.structure.nk}};
   json eff = json::array();
@@ -279,25 +277,25 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
     json p = json::object();
     for (const auto& v : f.parameters) p[v.name] = v.value;
     json pp = json::object();
-    for (const auto& v : f.prediction_parameters) pp[v.name] = num_json(v.value);
+    for (const auto& v : f.prediction_parameters) pp[v.name] = json_number(v.value);
     findings.push_back(
         {{"effect", f.effect},
          {"score", f.score},
-         {"validation_gain_percent", num_json(f.validation_gain_percent)},
-         {"estimation_gain_percent", num_json(f.estimation_gain_percent)},
-         {"gain_percent", num_json(f.gain_percent)},
-         {"prediction_estimation_gain_percent", num_json(f.prediction_estimation_gain_percent)},
-         {"prediction_validation_gain_percent", num_json(f.prediction_validation_gain_percent)},
-         {"prediction_bic_change", num_json(f.prediction_bic_change)},
+         {"validation_gain_percent", json_number(f.validation_gain_percent)},
+         {"estimation_gain_percent", json_number(f.estimation_gain_percent)},
+         {"gain_percent", json_number(f.gain_percent)},
+         {"prediction_estimation_gain_percent", json_number(f.prediction_estimation_gain_percent)},
+         {"prediction_validation_gain_percent", json_number(f.prediction_validation_gain_percent)},
+         {"prediction_bic_change", json_number(f.prediction_bic_change)},
          {"prediction_validation_deviance_change",
-          num_json(f.prediction_validation_deviance_change)},
-         {"prediction_drift_bic_change", num_json(f.prediction_drift_bic_change)},
+          json_number(f.prediction_validation_deviance_change)},
+         {"prediction_drift_bic_change", json_number(f.prediction_drift_bic_change)},
          {"prediction_parameters", pp},
-         {"parameter_count", num_json(f.parameter_count)},
-         {"output_bic_change", num_json(f.output_bic_change)},
-         {"validation_deviance_change", num_json(f.validation_deviance_change)},
+         {"parameter_count", json_number(f.parameter_count)},
+         {"output_bic_change", json_number(f.output_bic_change)},
+         {"validation_deviance_change", json_number(f.validation_deviance_change)},
          {"held_valve_validation_fitness_percent",
-          num_json(f.held_valve_validation_fitness_percent)},
+          json_number(f.held_valve_validation_fitness_percent)},
          {"evidence", f.evidence},
          {"evidence_test", f.evidence_test},
          {"parameters", p},
@@ -311,13 +309,14 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const std::vector<double>& t,
   j["judge"] = {
       {"kind", s.judge.horizon > 0 ? "k-step" : "simulated-output"},
       {"horizon_samples", s.judge.horizon},
-      {"model_fitness_percent", num_json(s.judge.model_fitness_percent)},
-      {"model_validation_fitness_percent", num_json(s.judge.model_validation_fitness_percent)}};
+      {"model_fitness_percent", json_number(s.judge.model_fitness_percent)},
+      {"model_validation_fitness_percent", json_number(s.judge.model_validation_fitness_percent)}};
   json ladder = json::array();
   for (const auto& st : d.steps)
-    ladder.push_back({{"model", to_string(st.fit.spec)},
-                      {"fitness_percent", num_json(st.fit.fitness_percent)},
-                      {"validation_fitness_percent", num_json(st.fit.validation_fitness_percent)}});
+    ladder.push_back(
+        {{"model", to_string(st.fit.spec)},
+         {"fitness_percent", json_number(st.fit.fitness_percent)},
+         {"validation_fitness_percent", json_number(st.fit.validation_fitness_percent)}});
   j["ladder"] = ladder;
   j["residual"] = {{"rms", s.residual.rms}, {"noise_level", s.residual.noise_level}};
   j["conclusion"] = d.conclusion;
@@ -408,8 +407,8 @@ nlohmann::json model_fit_json(const ModelFit& f, const ResidualAnalysis& where,
   j["model"] = to_string(f.spec);
   j["structure"] = {{"na", f.structure.na}, {"nb", f.structure.nb}, {"nk", f.structure.nk}};
   j["integrating"] = f.integrating;
-  j["fitness_percent"] = num_json(f.fitness_percent);
-  j["validation_fitness_percent"] = num_json(f.validation_fitness_percent);
+  j["fitness_percent"] = json_number(f.fitness_percent);
+  j["validation_fitness_percent"] = json_number(f.validation_fitness_percent);
   j["a"] = f.a;
   j["b"] = f.b;
   j["c"] = f.c;

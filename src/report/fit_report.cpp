@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "number_format.hpp"
+#include "valvediag/report/json_number.hpp"
 
 namespace valvediag {
 
@@ -51,10 +52,6 @@ std::string polynomial(const std::vector<double>& coef, int first_power, bool le
     s << " q^-" << first_power + static_cast<int>(i);
   }
   return s.str();
-}
-
-nlohmann::json number_or_null(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
 }
 
 double time_of(const FitContext& ctx, std::size_t k) {
@@ -208,22 +205,22 @@ nlohmann::json stiction_json(const StictionQuantification& q) {
   for (const auto& g : q.regions)
     rg.push_back({{"op_lo", g.op_lo},
                   {"op_hi", g.op_hi},
-                  {"fs_percent", number_or_null(g.figures.fs_percent)},
-                  {"fd_percent", number_or_null(g.figures.fd_percent)},
-                  {"fs_lo_percent", number_or_null(g.fs_lo)},
-                  {"fs_hi_percent", number_or_null(g.fs_hi)},
-                  {"band_percent", number_or_null(g.figures.band_percent)},
-                  {"jump_percent", number_or_null(g.figures.jump_percent)},
+                  {"fs_percent", json_number(g.figures.fs_percent)},
+                  {"fd_percent", json_number(g.figures.fd_percent)},
+                  {"fs_lo_percent", json_number(g.fs_lo)},
+                  {"fs_hi_percent", json_number(g.fs_hi)},
+                  {"band_percent", json_number(g.figures.band_percent)},
+                  {"jump_percent", json_number(g.figures.jump_percent)},
                   {"visited", g.visited},
                   {"valid", g.valid},
                   {"stiction", g.stiction},
                   {"data_reversals", g.data_reversals},
                   {"samples", g.samples}});
-  return {{"fs_percent", number_or_null(q.overall.fs_percent)},
-          {"fd_percent", number_or_null(q.overall.fd_percent)},
-          {"band_percent", number_or_null(q.overall.band_percent)},
-          {"jump_percent", number_or_null(q.overall.jump_percent)},
-          {"he_fit_percent", number_or_null(q.overall.fit_percent)},
+  return {{"fs_percent", json_number(q.overall.fs_percent)},
+          {"fd_percent", json_number(q.overall.fd_percent)},
+          {"band_percent", json_number(q.overall.band_percent)},
+          {"jump_percent", json_number(q.overall.jump_percent)},
+          {"he_fit_percent", json_number(q.overall.fit_percent)},
           {"stiction", q.stiction},
           {"valid", q.valid},
           {"jump_identified", q.jump_identified},
@@ -321,9 +318,9 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
                                                 : "preisach-hammerstein";
   j["method"] = ctx.method;
   j["structure"] = {{"na", s.na}, {"nb", s.nb}, {"nk", s.nk}, {"L", s.L}};
-  j["fitness_percent"] = number_or_null(r.fitness_percent);
+  j["fitness_percent"] = json_number(r.fitness_percent);
   if (r.estimation_end < ctx.samples)
-    j["validation_fitness_percent"] = number_or_null(r.validation_fitness_percent);
+    j["validation_fitness_percent"] = json_number(r.validation_fitness_percent);
   j["a"] = m.a;
   j["b"] = m.b;
   j["c"] = m.c;
@@ -363,7 +360,7 @@ nlohmann::json to_json(const IdentificationResult& r, const FitContext& ctx) {
   j["solver"] = {{"status", to_string(r.best.status)},
                  {"stop_reason", r.best.stop_reason},
                  {"kappa", r.best.kappa},
-                 {"bic", number_or_null(r.best.bic)},
+                 {"bic", json_number(r.best.bic)},
                  {"stable", r.best.stable},
                  {"configurations", r.configurations.size()}};
   if (ctx.residual) j["where"] = where_json(*ctx.residual, ctx);

@@ -10,12 +10,12 @@
 
 #include <chrono>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <system_error>
 #include <thread>
 #include <vector>
+
+#include "text.hpp"
 
 namespace valvediag::test {
 
@@ -91,14 +91,10 @@ inline CliResult run_cli(const std::string& bin, const std::vector<std::string>&
   std::vector<std::string> full{bin};
   full.insert(full.end(), args.begin(), args.end());
   const int st = wait_child(spawn(full, out, env, cwd), limit_s);
-  std::stringstream ss;
-  {
-    std::ifstream f(out);
-    ss << f.rdbuf();
-  }
+  std::string text = slurp(out);
   std::error_code ec;
   std::filesystem::remove(out, ec);  // one file per call would pile up over runs
-  return {st, ss.str()};
+  return {st, std::move(text)};
 }
 
 // The arguments `a` followed by `b`.

@@ -11,25 +11,17 @@
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "../common/run_cli.hpp"
+#include "../common/text.hpp"
 
 // Last: its <resolv.h> defines `_res`, which breaks Eigen headers included after it.
 #include <httplib.h>
 
 namespace valvediag::test {
-
-inline std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
 
 struct ServeProcess {
   pid_t pid = -1;
