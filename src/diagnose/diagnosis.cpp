@@ -824,7 +824,7 @@ DiagnosisStep evaluate(const std::vector<double>& u, const std::vector<double>& 
   // leaves, and is supported only when that one fails a likelihood-ratio test against it on the
   // estimation part (99 %, the extra parameters' degrees of freedom, its effective residual
   // samples), besides gaining what any finding must over the model.
-  // (Measured: position-dependent friction, five figures, gained 0.1-1 point more than a
+  // (Measured: position-dependent friction gained 0.1-1 point more than a
   // deadband on backlash loops and ranked first on a residual hint.)
   {
     Finding* pr = nullptr;

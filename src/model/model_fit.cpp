@@ -370,6 +370,7 @@ std::vector<double> neutral_point(const Search& s) {
       z[s.offset[k] + 1] = 0.5;  // over a tenth of it
       z[s.offset[k] + 3] = 0.5;
       z[s.offset[k] + 5] = s.coordinate(s.offset[k] + 5, 0.1);
+      z[s.offset[k] + 6] = 0.5;  // one fd/fs on both sides
     }
   }
   return z;
@@ -754,9 +755,9 @@ double effect_parameter_count(const std::string& effect, const ModelFit& fit, do
       if (v.name == name) return v.value;
     return fallback;
   };
-  // The general weights count each; position-dependent friction has fs, the mild side, fd/fs,
-  // the position and the transition's width.
-  if (effect == "preisach") return std::max(1.0, param("nonzero_weights", 5.0));
+  // The general weights count each; position-dependent friction has fs, the mild side, the two
+  // sides' fd/fs, the position and the transition's width.
+  if (effect == "preisach") return std::max(1.0, param("nonzero_weights", 6.0));
   if (effect == "disturbance") {
     const double h = param("knot_spacing", 0.0) / Ts;
     return h > 0 ? static_cast<double>(fit.estimation_end - fit.first_sample) / h + 1.0 : 10.0;
@@ -801,15 +802,18 @@ LinearOptions linear_options(const ModelSpec& spec, const ModelFitOptions& opt, 
 }
 
 // Effect k's coordinates searched from s.base (the others held there); s.best_z holds the best
-// point seen. Position-dependent friction in four stages, each from the best point before: one
+// point seen. Position-dependent friction in five stages, each from the best point before: one
 // level everywhere (He's fs and fd/fs: the two-parameter stiction it nests), then where and how
 // much the level changes (over a tenth of the working window), then that with the severe side's
-// level too, then all five polished together with the transition's width. A joint grid over five
-// coordinates is too coarse to hold a band of a few % of OP. The third stage because He's one
-// band lies between the two sides' and the second holds it as the severe side's: a polish from
-// there rarely climbs to the severe band (measured, 65 development cases of seeds 0-779: the trial
-// gained 2 points on 9 without it and 11 with it; on 6 and 8 of the 26 where the true model
-// gains 2).
+// level and fd/fs on a joint grid, then the two sides' fd/fs, then all six polished together with
+// the transition's width. A joint grid over six coordinates is too coarse to hold a band of a few
+// % of OP. The third stage because He's one band lies between the two sides' and the second
+// holds it as the severe side's: a polish from there rarely climbs to the severe band; and with
+// fd/fs in it because He's one fd/fs, held there, fits a severe band as a deadband of the
+// wrong width (measured, 65 development cases of seeds 0-779, against the three-coordinate grid
+// with fd/fs held and one fd/fs for both sides: the trial's estimation gain median 0.95 -> 1.47
+// points, 2 points or more on 19 -> 25, the true valve position fitting the estimation part 1
+// point better than the search's on 17 of 42 -> 11 of 37 trials that gained under 2).
 nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt) {
   const std::size_t o = s.offset[k];
   const auto stage = [&](std::vector<std::size_t> active, const ModelFitOptions& so) {
@@ -843,12 +847,15 @@ nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt)
       };
       const bool narrow = severe.upper > severe.lower * 1.01;
       if (narrow) rebox(severe);
-      stage({o, o + 1, o + 3}, coarse);
+      ModelFitOptions joint = coarse;  // four coordinates: 6^4 points, as many as 11^3
+      if (opt.grid_points == 0) joint.grid_points = 6;
+      stage({o, o + 1, o + 2, o + 3}, joint);
       if (narrow) rebox(whole);
     }
-    s.active = {o, o + 1, o + 2, o + 3, o + 5};
+    stage({o + 2, o + 6}, coarse);
+    s.active = {o, o + 1, o + 2, o + 3, o + 5, o + 6};
     std::vector<double> z = s.restrict_to_active(s.base);
-    const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations : 60 * 5;
+    const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations : 60 * 6;
     const nlopt_result r =
         run_nlopt(NLOPT_LN_NELDERMEAD, s, z, n_local, opt.local_xtol, nullptr, 0.02).result;
     s.base = s.best_z;
@@ -1007,7 +1014,7 @@ namespace {
 // Bayes' criterion of a fit's simulated output over the estimation samples [t0, t1), with k
 // parameters, on n_eff independent samples (the residual is coloured: counting every sample
 // lets 40 more weights buy a few tenths of a point): how `preisach:auto` weighs Preisach
-// weights against five friction figures.
+// weights against six friction figures.
 double output_bic(const ModelFit& f, const std::vector<double>& y, std::size_t t0, std::size_t t1,
                   double k, double n_eff) {
   if (f.status == ModelFitStatus::NoStableModel || f.y_sim.size() != y.size() || t1 <= t0 + 1)

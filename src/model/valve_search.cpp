@@ -60,7 +60,8 @@ std::vector<SearchParameter> search_parameters(const EffectSpec& e, const InputR
             {"fd/fs", "", 0.0, 1.0},
             {"position", "OP", r.lo(), r.hi()},
             {"motion at start", "", -1.0, 1.0, 3},
-            {"transition", "", 0.02, 1.0}};
+            {"transition", "", 0.02, 1.0},
+            {"fd/fs below less above", "", -1.0, 1.0}};
   if (find_effect(e.name)) return {};
   throw std::invalid_argument("unknown effect '" + e.name + "'");
 }
@@ -95,11 +96,14 @@ ValveEffect make_valve_block(const EffectSpec& e, const double* th, const InputR
   if (is_lag_effect(e.name)) return ActuatorLag(std::max(th[0], 0.0), r.Ts);
   if (e.name == "preisach" && e.variant == "position-dependent") {
     const double fs = std::max(th[0], 0.0), c = std::clamp(th[1], -1.0, 1.0);
+    // fd/fs above the change, and below it that plus th[6]: each side its own kinetic share
+    // (one share for both fitted the severe side's jump and distorted the mild side's band).
     const double ratio = std::clamp(th[2], 0.0, 1.0);
+    const double ratio_below = std::clamp(th[2] + th[6], 0.0, 1.0);
     const double half = std::max(std::clamp(th[5], 0.02, 1.0) * (r.hi() - r.lo()) / 2.0, 1e-6);
     const double below = c > 0 ? (1.0 - c) * fs : fs, above = c < 0 ? (1.0 + c) * fs : fs;
     return PositionDependentStiction(
-        {{th[3] - half, below, ratio * below}, {th[3] + half, above, ratio * above}},
+        {{th[3] - half, below, ratio_below * below}, {th[3] + half, above, ratio * above}},
         std::round(std::clamp(th[4], -1.0, 1.0)));
   }
   throw std::invalid_argument("effect '" + e.name + "' has no valve block to search");

@@ -571,17 +571,17 @@ TEST_CASE("preisach: position-dependent friction on the asymmetric valve" *
   show(p);
   REQUIRE(p.effects.size() == 1);
   CHECK(p.effects[0].variant == "position-dependent");
-  CHECK(p.valve_coordinates.size() == 6);
+  CHECK(p.valve_coordinates.size() == 7);
   CHECK(p.fitness_percent >= h.fitness_percent - 0.1);
   CHECK(param(p, "preisach", "severe_above") == 0.0);  // the severe side is the closed one
   CHECK(param(p, "preisach", "fs") == doctest::Approx(8.0).epsilon(0.3));
   CHECK(param(p, "preisach", "fs_mild") < 0.6 * param(p, "preisach", "fs"));
   CHECK(param(p, "preisach", "position") > 15.0);
   CHECK(param(p, "preisach", "position") < 50.0);
-  CHECK(effect_parameter_count("preisach", p, d.sample_period()) == 5.0);
-  // As a trial on the stiction model it takes He's place: it adds its five less He's two.
+  CHECK(effect_parameter_count("preisach", p, d.sample_period()) == 6.0);
+  // As a trial on the stiction model it takes He's place: it adds its six less He's two.
   CHECK(effect_parameter_count("stiction", h, d.sample_period()) == 2.0);
-  CHECK(added_parameter_count("preisach", p, h, d.sample_period()) == 3.0);
+  CHECK(added_parameter_count("preisach", p, h, d.sample_period()) == 4.0);
   CHECK(added_parameter_count("stiction", h, fit(d, "linear", split()), d.sample_period()) == 2.0);
   const ModelFit a = fit(d, "preisach", split());
   CHECK(to_string(a.spec) == "preisach");
