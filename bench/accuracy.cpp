@@ -23,6 +23,7 @@
 
 #include "valvediag/core/parallel_for.hpp"
 #include "valvediag/diagnose/diagnosis_benchmark.hpp"
+#include "valvediag/report/json_number.hpp"
 #include "valvediag/util/text_stats.hpp"
 
 using namespace valvediag;
@@ -188,32 +189,36 @@ int plant_report(const std::string& path) {
 
 // Each case with every finding's statistics, to study a ranking without running the fits again.
 nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, const char* range) {
-  const auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
   nlohmann::json cases = nlohmann::json::array();
   for (const auto& o : outcomes) {
     nlohmann::json findings = nlohmann::json::array();
     for (const auto& f : o.findings)
       findings.push_back(
           {{"effect", f.effect},
-           {"estimation_gain_percent", num(f.estimation_gain_percent)},
-           {"validation_gain_percent", num(f.validation_gain_percent)},
-           {"gain_percent", num(f.gain_percent)},
-           {"score", num(f.score)},
-           {"evidence", num(f.evidence)},
+           {"estimation_gain_percent", json_number(f.estimation_gain_percent)},
+           {"validation_gain_percent", json_number(f.validation_gain_percent)},
+           {"gain_percent", json_number(f.gain_percent)},
+           {"score", json_number(f.score)},
+           {"evidence", json_number(f.evidence)},
            {"evidence_test", f.evidence_test},
            {"supported", f.supported},
-           {"parameter_count", num(f.parameter_count)},
-           {"output_bic_change", num(f.output_bic_change)},
-           {"validation_deviance_change", num(f.validation_deviance_change)},
-           {"prediction_bic_change", num(f.prediction_bic_change)},
-           {"prediction_validation_deviance_change", num(f.prediction_validation_deviance_change)},
-           {"prediction_drift_bic_change", num(f.prediction_drift_bic_change)},
-           {"prediction_estimation_gain_percent", num(f.prediction_estimation_gain_percent)},
-           {"prediction_validation_gain_percent", num(f.prediction_validation_gain_percent)},
+           {"parameter_count", json_number(f.parameter_count)},
+           {"output_bic_change", json_number(f.output_bic_change)},
+           {"validation_deviance_change", json_number(f.validation_deviance_change)},
+           {"prediction_bic_change", json_number(f.prediction_bic_change)},
+           {"prediction_validation_deviance_change",
+            json_number(f.prediction_validation_deviance_change)},
+           {"prediction_drift_bic_change", json_number(f.prediction_drift_bic_change)},
+           {"prediction_estimation_gain_percent",
+            json_number(f.prediction_estimation_gain_percent)},
+           {"prediction_validation_gain_percent",
+            json_number(f.prediction_validation_gain_percent)},
            {"indistinguishable_from", f.indistinguishable_from}});
     nlohmann::json tests = nlohmann::json::array();
     for (const auto& t : o.residual_tests)
-      tests.push_back({{"name", t.name}, {"statistic", num(t.statistic)}, {"score", num(t.score)}});
+      tests.push_back({{"name", t.name},
+                       {"statistic", json_number(t.statistic)},
+                       {"score", json_number(t.score)}});
     cases.push_back(
         {{"range", range},
          {"residual_tests", tests},
@@ -225,10 +230,11 @@ nlohmann::json outcomes_json(const std::vector<BenchmarkOutcome>& outcomes, cons
          {"judge_horizon", o.judge.horizon},
          {"samples", o.samples},
          {"estimation_end", o.estimation_end},
-         {"model_fitness_percent", num(o.judge.model_fitness_percent)},
-         {"model_validation_fitness_percent", num(o.judge.model_validation_fitness_percent)},
-         {"true_model_gain_percent", num(o.true_model_gain)},
-         {"valve_search_shortfall_points", num(o.valve_search_shortfall)},
+         {"model_fitness_percent", json_number(o.judge.model_fitness_percent)},
+         {"model_validation_fitness_percent",
+          json_number(o.judge.model_validation_fitness_percent)},
+         {"true_model_gain_percent", json_number(o.true_model_gain)},
+         {"valve_search_shortfall_points", json_number(o.valve_search_shortfall)},
          {"climbed_model", o.climbed ? nlohmann::json(o.climbed_model) : nlohmann::json()},
          {"findings", findings}});
   }

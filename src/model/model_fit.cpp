@@ -855,7 +855,8 @@ nlopt_result search_effect(Search& s, std::size_t k, const ModelFitOptions& opt)
     stage({o + 2, o + 6}, coarse);
     s.active = {o, o + 1, o + 2, o + 3, o + 5, o + 6};
     std::vector<double> z = s.restrict_to_active(s.base);
-    const int n_local = opt.local_evaluations > 0 ? opt.local_evaluations : 60 * 6;
+    const int n_local =
+        opt.local_evaluations > 0 ? opt.local_evaluations : 60 * static_cast<int>(s.active.size());
     const nlopt_result r =
         run_nlopt(NLOPT_LN_NELDERMEAD, s, z, n_local, opt.local_xtol, nullptr, 0.02).result;
     s.base = s.best_z;
