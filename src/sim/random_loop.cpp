@@ -83,6 +83,15 @@ ValveDraw friction(Draw& r, const std::string& as_effect) {
   return v;
 }
 
+// The effect, variant included, that a start model has for a drawn friction or backlash: the
+// true model less the hidden effects is the valve's own model, not He's in place of Kano's.
+std::string modelled_as(const ValveEffect& block) {
+  if (std::holds_alternative<Deadband>(block)) return "deadband";
+  if (std::holds_alternative<KanoStiction>(block)) return "stiction:kano";
+  if (std::holds_alternative<StenmanStiction>(block)) return "stiction:stenman";
+  return "stiction";
+}
+
 ValveDraw backlash(Draw& r) {
   ValveDraw v;
   const double d = r.log_uniform(1.0, 6.0);
@@ -202,15 +211,13 @@ Draft draft(Draw& r, const std::string& category) {
   const bool lagged = hid("actuator-lag");
   if (lagged) {
     valve = r.chance(0.7) ? friction(r, "stiction") : backlash(r);
-    d.modelled.push_back(std::holds_alternative<Deadband>(valve.blocks.front()) ? "deadband"
-                                                                                : "stiction");
+    d.modelled.push_back(modelled_as(valve.blocks.front()));
     valve.truth.clear();
   }
   // A control may have a valve nonlinearity in its start model too.
   if (category == "none" && r.chance(0.4)) {
     valve = r.chance(0.6) ? friction(r, "stiction") : backlash(r);
-    d.modelled.push_back(std::holds_alternative<Deadband>(valve.blocks.front()) ? "deadband"
-                                                                                : "stiction");
+    d.modelled.push_back(modelled_as(valve.blocks.front()));
     valve.truth.clear();
   }
   w.lo = std::clamp(centre - width / 2, 3.0, 90.0);
@@ -385,9 +392,12 @@ std::string spec_text(std::vector<std::string> effects) {
   static const std::vector<std::string> order = {
       "actuator-lag",   "stiction", "deadband", "preisach",   "saturation",
       "characteristic", "delay",    "order",    "integrator", "disturbance"};
-  std::sort(effects.begin(), effects.end(), [](const std::string& a, const std::string& b) {
-    return std::find(order.begin(), order.end(), a) < std::find(order.begin(), order.end(), b);
-  });
+  // By effect name; a variant ("stiction:kano") sorts as its effect.
+  const auto rank = [](const std::string& e) {
+    return std::find(order.begin(), order.end(), e.substr(0, e.find(':')));
+  };
+  std::sort(effects.begin(), effects.end(),
+            [&rank](const std::string& a, const std::string& b) { return rank(a) < rank(b); });
   effects.erase(std::unique(effects.begin(), effects.end()), effects.end());
   std::string s;
   for (const auto& e : effects) s += (s.empty() ? "" : "+") + e;

@@ -40,8 +40,8 @@ struct RandomLoop {
   // The effects hidden from the start model (empty: a control with nothing hidden).
   std::vector<std::string> hidden;
   // The model a diagnosis starts from: the true model without the hidden effects, written as a
-  // model spec ("linear", "stiction", "delay+integrator", ...). Effects the loop has that are not
-  // hidden are in it.
+  // model spec ("linear", "stiction", "stiction:kano+integrator", ...), a friction as its own
+  // variant. Effects the loop has that are not hidden are in it.
   std::string start_model;
   // The true model spec (start model plus the hidden effects).
   std::string true_model;
