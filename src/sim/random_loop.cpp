@@ -86,10 +86,9 @@ ValveDraw friction(Draw& r, const std::string& as_effect) {
 // The effect, variant included, that a start model has for a drawn friction or backlash: the
 // true model less the hidden effects is the valve's own model, not He's in place of Kano's.
 std::string modelled_as(const ValveEffect& block) {
-  if (std::holds_alternative<Deadband>(block)) return "deadband";
-  if (std::holds_alternative<KanoStiction>(block)) return "stiction:kano";
-  if (std::holds_alternative<StenmanStiction>(block)) return "stiction:stenman";
-  return "stiction";
+  const std::string variant = effect_model(block);
+  return variant.empty() || variant == "he" ? effect_name(block)
+                                            : effect_name(block) + ":" + variant;
 }
 
 ValveDraw backlash(Draw& r) {
